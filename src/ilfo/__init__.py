@@ -1,0 +1,3 @@
+"""ilfo: imitation learning from observation (OOPS and its peers)."""
+
+__version__ = "0.1.0"

@@ -1,0 +1,16 @@
+"""Rewarders: from one learner episode's observations (T + 1, obs_dim) to rewards (T,)."""
+
+from ilfo.rewards.base import Rewarder, RewardOutput, Standardizer, make_atoms
+from ilfo.rewards.oops import OOPS, OOPSConfig
+from ilfo.rewards.pwil import PWIL, PWILConfig
+
+__all__ = [
+    "OOPS",
+    "PWIL",
+    "OOPSConfig",
+    "PWILConfig",
+    "RewardOutput",
+    "Rewarder",
+    "Standardizer",
+    "make_atoms",
+]

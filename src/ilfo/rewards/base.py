@@ -1,0 +1,136 @@
+"""What every rewarder shares: input checks, the standardiser, atoms, and the output type.
+
+A rewarder is built from expert demonstrations (each an array of T_i + 1 observations) and maps one
+learner episode's observations (T + 1, obs_dim) to per-step rewards (T,). It never sees actions or
+the task reward, and it knows nothing of the agent: the training loop is where they meet.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal, Protocol
+
+import numpy as np
+
+from ilfo.ot import OTResult
+
+Atoms = Literal["transitions", "states"]
+
+
+@dataclass(frozen=True)
+class RewardOutput:
+    """Rewards of one learner episode, with what produced them (for diagnostics).
+
+    Attributes:
+        rewards: Per-step rewards, shape (T,): reward t belongs to the transition (s_t, s_t+1).
+        coupling: The OT solution between learner atoms (T rows) and the expert atoms used.
+        distance: The transport cost <C, P> of that coupling, in the rewarder's standardised
+            space (the OT distance between learner and expert).
+        demo_index: Which demonstration the learner was matched to; None when all were pooled.
+    """
+
+    rewards: np.ndarray
+    coupling: OTResult
+    distance: float
+    demo_index: int | None
+
+
+class Rewarder(Protocol):
+    """Maps one learner episode, observations (T + 1, obs_dim), to a :class:`RewardOutput`."""
+
+    obs_dim: int
+
+    def __call__(self, observations: np.ndarray) -> RewardOutput: ...
+
+
+@dataclass(frozen=True)
+class Standardizer:
+    """Per-dimension affine map s -> (s - mean) / scale, fitted on expert states only.
+
+    Attributes:
+        mean: Shape (obs_dim,).
+        scale: Shape (obs_dim,), positive.
+    """
+
+    mean: np.ndarray
+    scale: np.ndarray
+
+    @classmethod
+    def from_demos(
+        cls,
+        demos: Sequence[np.ndarray],
+        std_factor: float = 3.0,
+        std_floor: float = 0.33,
+        eps: float = 1e-8,
+    ) -> Standardizer:
+        """Fit as the paper's code does: scale = std_factor * max(std, std_floor) + eps.
+
+        mean and std (ddof=1) come from the demonstrations with each demo's last state left out;
+        a zero std becomes 1 before the floor. PWIL uses std_factor=1, std_floor=0, eps=0.
+        """
+        states = np.concatenate([d[:-1] for d in demos], axis=0)
+        mean = states.mean(axis=0)
+        std = states.std(axis=0, ddof=1) if len(states) > 1 else np.ones(states.shape[1])
+        std = np.where(std == 0, 1.0, std)
+        std = np.maximum(std, std_floor)
+        return cls(mean=mean, scale=std_factor * std + eps)
+
+    def __call__(self, observations: np.ndarray) -> np.ndarray:
+        """Standardise observations of shape (..., obs_dim)."""
+        return (observations - self.mean) / self.scale
+
+
+def make_atoms(states: np.ndarray, atoms: Atoms) -> np.ndarray:
+    """Atoms of an episode's (standardised) states (T + 1, d).
+
+    ``transitions``: (s_t, s_t+1), shape (T, 2d). ``states``: s_t+1, the state each transition
+    leads to, shape (T, d), so that reward t still depends on the action taken at t.
+    """
+    if atoms == "transitions":
+        return np.concatenate([states[:-1], states[1:]], axis=1)
+    if atoms == "states":
+        return states[1:]
+    raise ValueError(f"atoms must be 'transitions' or 'states', got {atoms!r}")
+
+
+def check_demos(demos: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """Validate expert demonstrations: a non-empty list of finite (T_i + 1, obs_dim) arrays."""
+    if isinstance(demos, np.ndarray):
+        demos = [demos] if demos.ndim == 2 else list(demos)
+    demos = [np.asarray(d, dtype=np.float64) for d in demos]
+    if not demos:
+        raise ValueError("at least one expert demonstration is needed")
+    for i, demo in enumerate(demos):
+        _check_episode(demo, f"demo {i}")
+    dims = {d.shape[1] for d in demos}
+    if len(dims) > 1:
+        raise ValueError(f"demonstrations have different observation dimensions: {sorted(dims)}")
+    return demos
+
+
+def check_episode(observations: np.ndarray, obs_dim: int) -> np.ndarray:
+    """Validate one learner episode (T + 1, obs_dim) against the demos' dimension."""
+    observations = np.asarray(observations, dtype=np.float64)
+    _check_episode(observations, "learner episode")
+    if observations.shape[1] != obs_dim:
+        raise ValueError(
+            f"learner observations have dimension {observations.shape[1]}, "
+            f"the demonstrations {obs_dim}"
+        )
+    return observations
+
+
+def _check_episode(observations: np.ndarray, what: str) -> None:
+    if observations.ndim != 2:
+        raise ValueError(
+            f"{what} must be a 2-D array (T + 1, obs_dim), got shape {observations.shape}"
+        )
+    if observations.shape[0] < 2:
+        raise ValueError(
+            f"{what} needs at least 2 observations (one transition), got {observations.shape[0]}"
+        )
+    if observations.shape[1] == 0:
+        raise ValueError(f"{what} has observations of dimension 0")
+    if not np.isfinite(observations).all():
+        raise ValueError(f"{what} contains NaN or inf")
