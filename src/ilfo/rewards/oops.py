@@ -14,7 +14,7 @@ from typing import Literal
 
 import numpy as np
 
-from ilfo.ot import Metric, OTResult, cost_matrix, emd, greedy, sinkhorn
+from ilfo.ot import METRICS, Metric, OTResult, cost_matrix, emd, greedy, sinkhorn
 from ilfo.rewards.base import (
     Atoms,
     RewardOutput,
@@ -67,6 +67,8 @@ class OOPSConfig:
     def __post_init__(self) -> None:
         if self.atoms not in ("transitions", "states"):
             raise ValueError(f"atoms must be 'transitions' or 'states', got {self.atoms!r}")
+        if self.metric not in METRICS:
+            raise ValueError(f"unknown metric {self.metric!r}; choose one of {', '.join(METRICS)}")
         if self.solver not in ("sinkhorn", "emd", "greedy"):
             raise ValueError(f"solver must be sinkhorn, emd or greedy, got {self.solver!r}")
         if self.demo_selection not in ("random", "pooled", "nearest"):

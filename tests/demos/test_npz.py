@@ -1,0 +1,67 @@
+import numpy as np
+import pytest
+
+from ilfo import demos
+from ilfo.demos import Episode
+
+
+def _episodes(rng, with_extras=True):
+    out = []
+    for length in (5, 9):
+        obs = rng.normal(size=(length + 1, 3))
+        if with_extras:
+            out.append(Episode(obs, rng.normal(size=(length, 2)), rng.normal(size=length)))
+        else:
+            out.append(Episode(obs))
+    return out
+
+
+@pytest.mark.parametrize("with_extras", [True, False])
+def test_round_trip(tmp_path, with_extras):
+    episodes = _episodes(np.random.default_rng(0), with_extras)
+    path = tmp_path / "d.npz"
+    demos.save(path, episodes, "Hopper-v5", provenance={"policy": "test"})
+    loaded = demos.load(path)
+    assert loaded.env_id == "Hopper-v5" and loaded.provenance == {"policy": "test"}
+    assert len(loaded.episodes) == 2
+    for got, want in zip(loaded.episodes, episodes, strict=True):
+        np.testing.assert_array_equal(got.observations, want.observations)
+        if with_extras:
+            np.testing.assert_array_equal(got.actions, want.actions)
+            assert got.task_return == pytest.approx(want.rewards.sum())
+        else:
+            assert got.actions is None and got.task_return is None
+
+
+def test_bad_files(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        demos.load(tmp_path / "missing.npz")
+    junk = tmp_path / "junk.npz"
+    junk.write_bytes(b"not a zip at all")
+    with pytest.raises(ValueError, match="not a readable"):
+        demos.load(junk)
+    partial = tmp_path / "partial.npz"
+    np.savez(partial, observations=np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="lacks the key"):
+        demos.load(partial)
+    pickled = tmp_path / "pickled.npz"
+    np.savez(
+        pickled,
+        schema_version=1,
+        episode_lengths=np.array([2]),
+        observations=np.array([object(), object()], dtype=object),
+    )
+    with pytest.raises(ValueError, match="not a readable"):
+        demos.load(pickled)
+    mismatched = tmp_path / "mismatched.npz"
+    np.savez(
+        mismatched, schema_version=1, episode_lengths=np.array([4]), observations=np.zeros((3, 2))
+    )
+    with pytest.raises(ValueError, match="do not match"):
+        demos.load(mismatched)
+    nan = tmp_path / "nan.npz"
+    np.savez(
+        nan, schema_version=1, episode_lengths=np.array([2]), observations=np.full((2, 2), np.nan)
+    )
+    with pytest.raises(ValueError, match="NaN"):
+        demos.load(nan)

@@ -1,0 +1,143 @@
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from ilfo.rewards import OOPS, PWIL, OOPSConfig, PWILConfig, Standardizer
+
+
+def _episode(length=40, dim=5, seed=0, scale=1.0):
+    rng = np.random.default_rng(seed)
+    return np.cumsum(rng.normal(scale=scale, size=(length + 1, dim)), axis=0)
+
+
+def test_standardizer_follows_the_reference_recipe():
+    demos = [_episode(seed=1), _episode(seed=2)]
+    demos[0][:, 2] = 7.0  # constant in demo 0 ...
+    demos[1][:, 2] = 7.0  # ... and in demo 1: zero std -> 1
+    states = np.concatenate([d[:-1] for d in demos])
+    std = states.std(axis=0, ddof=1)
+    std[2] = 1.0
+    std = np.maximum(std, 0.33)
+    fitted = Standardizer.from_demos(demos)
+    np.testing.assert_allclose(fitted.mean, states.mean(axis=0))
+    np.testing.assert_allclose(fitted.scale, 3 * std + 1e-8)
+
+
+@pytest.mark.parametrize("solver", ["sinkhorn", "emd", "greedy"])
+@pytest.mark.parametrize("atoms", ["transitions", "states"])
+def test_rewards_sum_to_minus_scale_times_transport_cost(solver, atoms):
+    demo, learner = _episode(seed=3), _episode(seed=4)
+    out = OOPS([demo], OOPSConfig(solver=solver, atoms=atoms))(learner)
+    num_steps = len(learner) - 1
+    scale = 5.0 * num_steps / np.sqrt(demo.shape[1])
+    assert out.rewards.shape == (num_steps,)
+    assert out.rewards.sum() == pytest.approx(-scale * out.distance, rel=1e-12)
+    assert (out.rewards <= 0).all()
+
+
+def test_the_expert_itself_gets_zero_reward_under_exact_ot():
+    demo = _episode(seed=5)
+    out = OOPS([demo], OOPSConfig(solver="emd"))(demo)
+    np.testing.assert_allclose(out.rewards, 0.0, atol=1e-12)
+    sinkhorn_out = OOPS([demo])(demo)
+    far = OOPS([demo])(_episode(seed=6, scale=3.0))
+    assert sinkhorn_out.distance < 0.2 * far.distance
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 10_000))
+def test_rewards_are_invariant_to_permuting_expert_atoms(seed):
+    demo, learner = _episode(length=25, seed=7), _episode(length=25, seed=8)
+    rewarder = OOPS([demo])
+    base = rewarder(learner).rewards
+    perm = np.random.default_rng(seed).permutation(len(rewarder.expert_atoms[0]))
+    rewarder.expert_atoms[0] = rewarder.expert_atoms[0][perm]
+    np.testing.assert_allclose(rewarder(learner).rewards, base, rtol=1e-7, atol=1e-10)
+
+
+def test_demo_selection_modes():
+    demos = [_episode(seed=10), _episode(seed=11), _episode(seed=12)]
+    learner = demos[1] + 1e-3
+    nearest = OOPS(demos, OOPSConfig(demo_selection="nearest"))(learner)
+    assert nearest.demo_index == 1
+    pooled = OOPS(demos, OOPSConfig(demo_selection="pooled"))(learner)
+    assert pooled.demo_index is None
+    assert pooled.coupling.plan.shape == (40, 120)
+    draws = [OOPS(demos, OOPSConfig(seed=3))(learner).demo_index for _ in range(2)]
+    assert draws[0] == draws[1]  # same seed, same demo
+    rewarder = OOPS(demos, OOPSConfig(seed=3))
+    assert len({rewarder(learner).demo_index for _ in range(30)}) == 3
+
+
+def test_warm_start_gives_the_same_rewards():
+    demo = _episode(seed=13)
+    learners = [_episode(seed=14), _episode(seed=14) + 0.01]
+    cold = OOPS([demo])
+    warm = OOPS([demo], OOPSConfig(warm_start=True))
+    for learner in learners:
+        np.testing.assert_allclose(warm(learner).rewards, cold(learner).rewards, atol=1e-6)
+
+
+def test_episodes_of_other_lengths_than_the_demo():
+    out = OOPS([_episode(length=50, seed=15)])(_episode(length=17, seed=16))
+    assert out.rewards.shape == (17,)
+    assert out.coupling.plan.shape == (17, 50)
+
+
+def test_pwil_rewards_the_expert_with_alpha():
+    demo = _episode(seed=20)
+    out = PWIL([demo])(demo)
+    np.testing.assert_allclose(out.rewards, 5.0)
+    far = PWIL([demo])(_episode(seed=21, scale=2.0)).rewards
+    assert ((far > 0) & (far < 5.0)).all()
+
+
+def test_pwil_horizon_gives_short_episodes_less_mass():
+    demo = _episode(length=40, seed=22)
+    out = PWIL([demo], PWILConfig(horizon=40))(demo[:11])
+    assert out.coupling.plan.sum() == pytest.approx(10 / 40)
+    with pytest.raises(ValueError, match="horizon"):
+        PWIL([demo], PWILConfig(horizon=5))(demo)
+
+
+@pytest.mark.parametrize("make", [OOPS, PWIL])
+@pytest.mark.parametrize(
+    ("episode", "match"),
+    [
+        (np.full((10, 5), np.nan), "NaN or inf"),
+        (np.full((10, 5), np.inf), "NaN or inf"),
+        (np.zeros(10), "2-D"),
+        (np.zeros((10, 5, 1)), "2-D"),
+        (np.zeros((10, 4)), "dimension 4"),
+        (np.zeros((0, 5)), "at least 2 observations"),
+        (np.zeros((1, 5)), "at least 2 observations"),
+    ],
+)
+def test_bad_learner_episodes(make, episode, match):
+    rewarder = make([_episode(seed=30)])
+    with pytest.raises(ValueError, match=match):
+        rewarder(episode)
+
+
+@pytest.mark.parametrize("make", [OOPS, PWIL])
+def test_bad_demos(make):
+    with pytest.raises(ValueError, match="at least one"):
+        make([])
+    with pytest.raises(ValueError, match="different observation dimensions"):
+        make([_episode(dim=5), _episode(dim=6)])
+    with pytest.raises(ValueError, match="demo 1 contains NaN"):
+        make([_episode(), np.full((5, 5), np.nan)])
+    with pytest.raises(ValueError, match="at least 2 observations"):
+        make([np.zeros((1, 5))])
+
+
+def test_bad_config():
+    with pytest.raises(ValueError, match="solver"):
+        OOPSConfig(solver="hungarian")
+    with pytest.raises(ValueError, match="reg"):
+        OOPSConfig(reg=0.0)
+    with pytest.raises(ValueError, match="demo_selection"):
+        OOPSConfig(demo_selection="best")
+    with pytest.raises(ValueError, match="unknown metric"):
+        OOPS([_episode()], OOPSConfig(metric="manhattan"))(_episode())

@@ -1,0 +1,33 @@
+import json
+
+import numpy as np
+
+from ilfo.cli import main
+from ilfo.paths import bundled_demos
+
+
+def test_reward_demo_on_bundled_data_ranks_learners(capsys):
+    assert main(["reward", "--json"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert len(rows) == 3 and all(r["converged"] for r in rows)
+    noisy, same_policy, random_policy = (r["ot_distance"] for r in rows)
+    # The noisy copy of the demo is closest, the random-action episode farthest.
+    assert noisy < same_policy < random_policy
+
+
+def test_reward_with_every_solver_and_pwil(capsys):
+    for extra in (["--solver", "emd"], ["--solver", "greedy"], ["--rewarder", "pwil"]):
+        assert main(["reward", "--json", "--learners", "1", *extra]) == 0
+        row = json.loads(capsys.readouterr().out)
+        assert np.isfinite(row["mean_reward"])
+
+
+def test_reward_errors_are_clear(capsys, tmp_path):
+    assert main(["reward", "--demos", str(tmp_path / "none.npz")]) == 2
+    assert "no demonstration file" in capsys.readouterr().err
+    assert main(["reward", "--expert", "99"]) == 2
+    assert "out of range" in capsys.readouterr().err
+
+
+def test_bundled_demos_are_found():
+    assert bundled_demos("Hopper-v5-scripted").is_file()
