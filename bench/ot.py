@@ -34,9 +34,9 @@ import numpy as np
 
 # This file is itself named ot.py: keep its folder off the path so `import ot` finds POT.
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
-import ot as pot  # noqa: E402
+import ot as pot
 from ilfo import demos
-from ilfo.ot import cost_matrix, emd, marginal_error, sinkhorn
+from ilfo.ot import OTResult, cost_matrix, emd, marginal_error, sinkhorn
 from ilfo.paths import bundled_demos
 from ilfo.rewards import Standardizer, make_atoms
 
@@ -85,6 +85,32 @@ def cases(noise: float) -> dict[str, tuple[np.ndarray, list[np.ndarray], float]]
     }
 
 
+def row(
+    base: dict,
+    impl: str,
+    seconds: float,
+    plan: np.ndarray,
+    iterations: int | None,
+    converged: bool,
+    reference: OTResult,
+    cost: np.ndarray,
+    extrapolated: bool = False,
+) -> dict:
+    """One table row: the timing, and the plan's errors against the marginals and ilfo's plan."""
+    n, m = cost.shape
+    return {
+        **base,
+        "impl": impl,
+        "seconds": seconds,
+        "iterations": iterations,
+        "converged": converged,
+        "marginal_error": marginal_error(plan, np.full(n, 1.0 / n), np.full(m, 1.0 / m)),
+        "plan_diff": float(np.abs(plan - reference.plan).max()),
+        "cost": float((plan * cost).sum()),
+        "extrapolated": extrapolated,
+    }
+
+
 def run(args: argparse.Namespace) -> list[dict]:
     rows: list[dict] = []
     for name, case in cases(args.noise).items():
@@ -95,54 +121,22 @@ def run(args: argparse.Namespace) -> list[dict]:
         base = {"bench": "sinkhorn", "case": name, "shape": [n, m], "reg": REG, "tol": tol}
 
         t, ours = best_time(lambda c=cost, t=tol: sinkhorn(c, reg=REG, tol=t), args.repeat)
-        rows.append(
-            {
-                **base,
-                "impl": "ilfo",
-                "seconds": t,
-                "iterations": ours.iterations,
-                "converged": ours.converged,
-                "marginal_error": ours.marginal_error,
-                "plan_diff": 0.0,
-                "cost": ours.cost,
-            }
-        )
-
-        def record(
-            impl: str,
-            seconds: float,
-            plan: np.ndarray,
-            iterations,
-            converged,
-            extrapolated: bool = False,
-        ) -> None:
-            rows.append(
-                {
-                    **base,
-                    "impl": impl,
-                    "seconds": seconds,
-                    "iterations": iterations,
-                    "converged": converged,
-                    "marginal_error": marginal_error(plan, a, b),
-                    "plan_diff": float(np.abs(plan - ours.plan).max()),
-                    "cost": float((plan * cost).sum()),
-                    "extrapolated": extrapolated,
-                }
-            )
-
+        rows.append(row(base, "ilfo", t, ours.plan, ours.iterations, ours.converged, ours, cost))
         t, plain = best_time(
             lambda c=cost, t=tol: sinkhorn(c, reg=REG, tol=t, acceleration="none"), 1
         )
-        record("ilfo-plain", t, plain.plan, plain.iterations, plain.converged)
+        rows.append(
+            row(base, "ilfo-plain", t, plain.plan, plain.iterations, plain.converged, ours, cost)
+        )
         if name == "near":
-            prev_cost = cost_matrix(case[3], experts[0])
-            prev = sinkhorn(prev_cost, reg=REG, tol=tol)
+            prev = sinkhorn(cost_matrix(case[3], experts[0]), reg=REG, tol=tol)
             t, warm = best_time(
                 lambda c=cost, t=tol, p=prev: sinkhorn(c, reg=REG, tol=t, init=p.potentials),
                 args.repeat,
             )
-            record("ilfo-warm", t, warm.plan, warm.iterations, warm.converged)
-
+            rows.append(
+                row(base, "ilfo-warm", t, warm.plan, warm.iterations, warm.converged, ours, cost)
+            )
         for method in ("sinkhorn", "sinkhorn_log"):
             cap = 20000
             if method == "sinkhorn_log" and (args.quick or name != "typical"):
@@ -156,27 +150,22 @@ def run(args: argparse.Namespace) -> list[dict]:
             extrapolated = cap < 20000 and iters >= cap
             if extrapolated:
                 seconds *= 20000 / iters
-            record(
-                f"pot-{method}",
-                seconds,
-                np.asarray(plan),
-                iters,
-                bool(log["err"][-1] < tol) if log["err"] else False,
-                extrapolated,
+            converged = bool(log["err"] and log["err"][-1] < tol)
+            rows.append(
+                row(
+                    base,
+                    f"pot-{method}",
+                    seconds,
+                    np.asarray(plan),
+                    iters,
+                    converged,
+                    ours,
+                    cost,
+                    extrapolated,
+                )
             )
         t, exact = best_time(lambda c=cost: emd(c), 1)
-        rows.append(
-            {
-                **base,
-                "impl": "pot-emd",
-                "seconds": t,
-                "iterations": None,
-                "converged": exact.converged,
-                "marginal_error": exact.marginal_error,
-                "plan_diff": float(np.abs(exact.plan - ours.plan).max()),
-                "cost": exact.cost,
-            }
-        )
+        rows.append(row(base, "pot-emd", t, exact.plan, None, exact.converged, ours, cost))
     return rows
 
 
