@@ -1,0 +1,53 @@
+"""Helpers shared by the agents (not public API)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+import optax
+from numpy.typing import ArrayLike
+
+
+def as_float_bound(max_action: float | ArrayLike) -> float:
+    bound = np.asarray(max_action, dtype=np.float64)
+    if bound.size == 0 or not np.all(bound == bound.flat[0]) or bound.flat[0] <= 0:
+        raise ValueError("max_action must be one positive bound shared by all action dimensions")
+    return float(bound.flat[0])
+
+
+def make_optimizer(lr: float, grad_clip: float | None) -> optax.GradientTransformation:
+    if grad_clip is None:
+        return optax.adam(lr)
+    return optax.chain(optax.clip_by_global_norm(grad_clip), optax.adam(lr))
+
+
+def make_normalizer_setter(
+    obs_dim: int, time_feature: bool
+) -> Callable[[Any, ArrayLike, ArrayLike], Any]:
+    """Build ``set_normalizer(state, mean, std) -> state`` for states with obs_mean/obs_std.
+
+    mean, std: (obs_dim,), or (obs_dim - 1,) when the observation ends with a time feature
+    (the time feature then gets mean 0, std 1). Raises if the normaliser was already set.
+    """
+
+    def set_normalizer(state: Any, mean: ArrayLike, std: ArrayLike) -> Any:
+        if bool(state.normalizer_set):
+            raise RuntimeError("the observation normaliser can be set only once")
+        mean = np.asarray(mean, np.float32)
+        std = np.asarray(std, np.float32)
+        if time_feature and mean.shape == (obs_dim - 1,):
+            mean = np.append(mean, np.float32(0.0))
+        if time_feature and std.shape == (obs_dim - 1,):
+            std = np.append(std, np.float32(1.0))
+        if mean.shape != (obs_dim,) or std.shape != (obs_dim,):
+            raise ValueError(f"mean and std must have shape ({obs_dim},)")
+        if not np.all(np.isfinite(mean)) or not np.all(std > 0):
+            raise ValueError("mean must be finite and std positive")
+        return state.replace(
+            obs_mean=jnp.asarray(mean), obs_std=jnp.asarray(std), normalizer_set=jnp.array(True)
+        )
+
+    return set_normalizer

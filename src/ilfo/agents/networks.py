@@ -1,0 +1,144 @@
+"""Neural networks shared by the agents (flax.linen).
+
+All modules take batch-first inputs and accept any leading batch shape:
+
+- ``DeterministicActor``: obs (..., obs_dim) -> action (..., action_dim), ``max_action * tanh``.
+- ``CriticEnsemble``: (obs (..., obs_dim), action (..., action_dim)) -> Q (num_critics, ...).
+  One ``Critic`` module vmapped over a leading ensemble axis of its parameters, so the twin
+  critics of TD3/SAC run as one batched matmul chain instead of two.
+- ``SquashedGaussianActor``: obs -> (mean, log_std) of the pre-tanh Gaussian, both
+  (..., action_dim); use ``sample_squashed`` / ``deterministic_squashed`` to get actions.
+
+Observation normalisation is not done here: the agents apply ``(obs - mean) / std`` before
+calling the networks, so the networks stay plain functions of their inputs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+
+__all__ = [
+    "MLP",
+    "Critic",
+    "CriticEnsemble",
+    "DeterministicActor",
+    "SquashedGaussianActor",
+    "deterministic_squashed",
+    "sample_squashed",
+]
+
+_LOG_2 = float(jnp.log(2.0))
+
+
+class MLP(nn.Module):
+    """ReLU multilayer perceptron with a linear output layer.
+
+    x (..., in_dim) -> (..., out_dim).
+    """
+
+    hidden: Sequence[int]
+    out_dim: int
+
+    @nn.compact
+    def __call__(self, x: jax.Array) -> jax.Array:
+        for width in self.hidden:
+            x = nn.relu(nn.Dense(width)(x))
+        return nn.Dense(self.out_dim)(x)
+
+
+class DeterministicActor(nn.Module):
+    """TD3/DDPG actor: obs (..., obs_dim) -> max_action * tanh(MLP(obs)), (..., action_dim)."""
+
+    hidden: Sequence[int]
+    action_dim: int
+    max_action: float | jax.Array = 1.0
+
+    @nn.compact
+    def __call__(self, obs: jax.Array) -> jax.Array:
+        return self.max_action * jnp.tanh(MLP(self.hidden, self.action_dim)(obs))
+
+
+class Critic(nn.Module):
+    """One Q-function: (obs (..., obs_dim), action (..., action_dim)) -> Q (...)."""
+
+    hidden: Sequence[int]
+
+    @nn.compact
+    def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
+        x = jnp.concatenate([obs, action], axis=-1)
+        return MLP(self.hidden, 1)(x)[..., 0]
+
+
+class CriticEnsemble(nn.Module):
+    """``num_critics`` independent critics evaluated at once.
+
+    (obs (..., obs_dim), action (..., action_dim)) -> Q (num_critics, ...).
+
+    Parameters carry a leading axis of size ``num_critics`` (``nn.vmap`` with
+    ``variable_axes={'params': 0}``, ``split_rngs={'params': True}``: each member gets its own
+    initialisation). Slicing that axis of the parameter tree (``p[:1]``) and applying a
+    ``CriticEnsemble(hidden, 1)`` evaluates a single member, which TD3's actor loss uses.
+    """
+
+    hidden: Sequence[int]
+    num_critics: int = 2
+
+    @nn.compact
+    def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
+        ensemble = nn.vmap(
+            Critic,
+            variable_axes={"params": 0},
+            split_rngs={"params": True},
+            in_axes=None,
+            out_axes=0,
+            axis_size=self.num_critics,
+        )
+        return ensemble(self.hidden, name="ensemble")(obs, action)
+
+
+class SquashedGaussianActor(nn.Module):
+    """SAC actor: obs (..., obs_dim) -> (mean, log_std), each (..., action_dim).
+
+    The action is ``max_action * tanh(u)`` with ``u ~ N(mean, exp(log_std)^2)``; ``log_std`` is
+    clipped to ``[log_std_min, log_std_max]`` (Haarnoja et al.'s -20 and 2).
+    """
+
+    hidden: Sequence[int]
+    action_dim: int
+    log_std_min: float = -20.0
+    log_std_max: float = 2.0
+
+    @nn.compact
+    def __call__(self, obs: jax.Array) -> tuple[jax.Array, jax.Array]:
+        out = MLP(self.hidden, 2 * self.action_dim)(obs)
+        mean, log_std = jnp.split(out, 2, axis=-1)
+        log_std = jnp.clip(log_std, self.log_std_min, self.log_std_max)
+        return mean, log_std
+
+
+def sample_squashed(
+    key: jax.Array, mean: jax.Array, log_std: jax.Array, max_action: float | jax.Array
+) -> tuple[jax.Array, jax.Array]:
+    """Reparameterised sample of ``max_action * tanh(u)``, ``u ~ N(mean, std^2)``.
+
+    mean, log_std: (..., action_dim). Returns (action (..., action_dim), log_prob (...)), where
+    log_prob is the log density of the returned action itself, tanh and ``max_action`` scaling
+    included (change of variables), computed stably as
+    ``log(1 - tanh(u)^2) = 2 (log 2 - u - softplus(-2u))``.
+    """
+    std = jnp.exp(log_std)
+    eps = jax.random.normal(key, mean.shape, mean.dtype)
+    u = mean + std * eps
+    gauss_logp = -0.5 * eps**2 - log_std - 0.5 * jnp.log(2.0 * jnp.pi)
+    log_det = 2.0 * (_LOG_2 - u - jax.nn.softplus(-2.0 * u)) + jnp.log(max_action)
+    log_prob = jnp.sum(gauss_logp - log_det, axis=-1)
+    return max_action * jnp.tanh(u), log_prob
+
+
+def deterministic_squashed(mean: jax.Array, max_action: float | jax.Array) -> jax.Array:
+    """The mode-like action ``max_action * tanh(mean)`` used for evaluation, (..., action_dim)."""
+    return max_action * jnp.tanh(mean)

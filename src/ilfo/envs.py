@@ -1,0 +1,93 @@
+"""Environments: ``make_env`` for the paper's gymnasium tasks, in fixed-horizon or standard mode.
+
+Fixed-horizon mode (the paper's code) runs every episode to its full length: a termination the
+environment reports is recorded in ``info["env_terminated"]`` and the episode goes on; only the
+time limit ends it. Standard mode is plain gymnasium: an episode ends at termination (no
+bootstrapping) or truncation (bootstrapping continues).
+"""
+
+from __future__ import annotations
+
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+
+SUPPORTED_ENVS: tuple[str, ...] = (
+    "Hopper-v5",
+    "Walker2d-v5",
+    "HalfCheetah-v5",
+    "Ant-v5",
+    "Humanoid-v5",
+    "BipedalWalker-v3",
+    "Pendulum-v1",  # not in the paper: a seconds-long sanity task for tests
+)
+
+
+class IgnoreTermination(gym.Wrapper):
+    """Turns ``terminated`` into ``info["env_terminated"] = True`` so the episode goes on."""
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        info = dict(info)
+        info["env_terminated"] = bool(terminated)
+        return obs, reward, False, truncated, info
+
+
+def make_env(
+    env_id: str,
+    fixed_horizon: bool = True,
+    seed: int | None = None,
+    horizon: int | None = None,
+    render_mode: str | None = None,
+) -> gym.Env:
+    """Make a gymnasium environment.
+
+    Args:
+        env_id: One of :data:`SUPPORTED_ENVS` (other registered ids work without guarantees).
+        fixed_horizon: Run every episode to ``horizon`` steps, ignoring termination (the paper).
+        seed: Seeds the first reset and the action space; later resets continue the same stream.
+        horizon: Episode length; the environment's registered limit if None (1,000 for MuJoCo).
+        render_mode: Passed to gymnasium (e.g. ``rgb_array`` for videos).
+
+    Returns:
+        The environment, with ``env.spec.max_episode_steps`` equal to the horizon.
+    """
+    try:
+        spec = gym.spec(env_id)
+    except gym.error.Error as err:
+        raise ValueError(f"unknown environment {env_id!r}; supported: {SUPPORTED_ENVS}") from err
+    limit = horizon or spec.max_episode_steps or 1000
+    if limit < 1:
+        raise ValueError(f"horizon must be >= 1, got {horizon}")
+    try:
+        env = gym.make(env_id, max_episode_steps=limit, render_mode=render_mode)
+    except gym.error.DependencyNotInstalled as err:
+        raise ValueError(f"{env_id} needs an optional dependency: {err}") from err
+    if fixed_horizon:
+        # Outside TimeLimit, so that the time limit still truncates at `limit`.
+        env = IgnoreTermination(env.env) if isinstance(env, gym.wrappers.TimeLimit) else env
+        env = gym.wrappers.TimeLimit(env, max_episode_steps=limit)
+    if seed is not None:
+        env.reset(seed=seed)
+        env.action_space.seed(seed)
+    return env
+
+
+def episode_scores(rewards: np.ndarray, env_terminated: np.ndarray) -> tuple[float, float]:
+    """Both scores of one fixed-horizon episode: (fixed-horizon score, standard return).
+
+    The fixed-horizon score (the paper's) sums the task reward over the whole horizon with the
+    reward of every step on which the environment reported termination set to 0. The standard
+    return sums rewards up to and including the first termination, as a standard episode would.
+
+    Args:
+        rewards: Task rewards, shape (T,).
+        env_terminated: Whether the environment reported termination at each step, shape (T,).
+    """
+    rewards = np.asarray(rewards, dtype=np.float64)
+    env_terminated = np.asarray(env_terminated, dtype=bool)
+    fixed = float(np.where(env_terminated, 0.0, rewards).sum())
+    hits = np.flatnonzero(env_terminated)
+    end = hits[0] + 1 if hits.size else len(rewards)
+    return fixed, float(rewards[:end].sum())

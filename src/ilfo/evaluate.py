@@ -1,0 +1,81 @@
+"""Evaluate a finished (or checkpointed) run's policy."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import flax.serialization
+import numpy as np
+
+from ilfo.envs import episode_scores, make_env
+from ilfo.train import TrainConfig, Trainer, rollout_policy
+
+
+def evaluate_run(run_dir: Path, episodes: int = 10, video: str | None = None) -> dict[str, Any]:
+    """Run deterministic fixed-horizon episodes of a run's policy and summarise them.
+
+    Uses ``policy.msgpack`` if the run finished, else its latest checkpoint.
+    """
+    run_dir = Path(run_dir)
+    config_path = run_dir / "config.json"
+    if not config_path.is_file():
+        raise FileNotFoundError(f"{run_dir} is not a run directory (no config.json)")
+    if episodes < 1:
+        raise ValueError(f"--episodes must be >= 1, got {episodes}")
+    config = TrainConfig(**json.loads(config_path.read_text()))
+    trainer = Trainer(config, run_dir, progress=False)
+    policy = run_dir / "policy.msgpack"
+    if not policy.is_file():
+        latest = run_dir / "checkpoints" / "latest"
+        if not latest.is_file():
+            raise FileNotFoundError(f"{run_dir} has neither policy.msgpack nor a checkpoint")
+        policy = run_dir / "checkpoints" / latest.read_text().strip() / "agent.msgpack"
+    state = flax.serialization.from_bytes(trainer.state, policy.read_bytes())
+    env = trainer.eval_env
+    frames: list[np.ndarray] = []
+    if video:
+        env = make_env(config.env, True, horizon=trainer.horizon, render_mode="rgb_array")
+    scores, returns, distances = [], [], []
+    for k in range(episodes):
+        rollout = rollout_policy(
+            env, trainer.agent, state, trainer.horizon, seed=k, render=bool(video) and k == 0
+        )
+        frames.extend(rollout.frames)
+        fixed, standard = episode_scores(rollout.rewards, rollout.env_terminated)
+        scores.append(fixed)
+        returns.append(standard)
+        if trainer.distance_probe is not None:
+            distances.append(trainer.distance_probe(rollout.observations).distance)
+    result: dict[str, Any] = {
+        "env": config.env,
+        "algo": config.algo,
+        "episodes": episodes,
+        "score_mean": float(np.mean(scores)),
+        "score_std": float(np.std(scores)),
+        "return_mean": float(np.mean(returns)),
+        "return_std": float(np.std(returns)),
+    }
+    if not np.isnan(trainer.demo_return):
+        result["score_norm"] = result["score_mean"] / trainer.demo_return
+        result["return_norm"] = result["return_mean"] / trainer.demo_return
+    if distances:
+        result["ot_distance"] = float(np.mean(distances))
+    if video:
+        _write_video(video, frames, fps=int(env.metadata.get("render_fps", 50)))
+        result["video"] = video
+    return result
+
+
+def _write_video(path: str, frames: list[np.ndarray], fps: int) -> None:
+    try:
+        import imageio.v2 as imageio
+    except ImportError as err:
+        raise ValueError(
+            "--video needs imageio and imageio-ffmpeg: pip install imageio-ffmpeg"
+        ) from err
+    try:
+        imageio.mimsave(path, frames, fps=fps)
+    except Exception as err:  # the ffmpeg plugin raises several kinds
+        raise ValueError(f"could not write {path}: {err}") from err

@@ -1,0 +1,634 @@
+"""The training loop: collect an episode, reward it, store it, update the agent, evaluate.
+
+This is the one place where a rewarder and an agent meet (neither imports the other). It follows
+the paper's code (docs/reproduction.md): uniformly random actions for ``start_steps``, then one
+episode at a time with the policy frozen; at the end of each episode its OT rewards are computed
+and the episode enters the replay buffer, then as many updates run as steps were collected (one
+jitted call). Every ``eval_every`` steps, deterministic fixed-horizon episodes are scored.
+
+A run directory holds ``config.json``, ``metrics.csv``, ``checkpoints/``, ``policy.msgpack`` (the
+final agent) and ``learning_curve.png``. Checkpoints are taken at episode boundaries, where the
+whole state of the run is the agent state, the replay buffer, the rewarder's generator and a few
+counters; every other source of randomness is derived from (seed, episode index), so a resumed
+run reproduces the uninterrupted one exactly.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import os
+import shutil
+import signal
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal, NamedTuple
+
+import flax.serialization
+import jax
+import numpy as np
+
+from ilfo import demos as demo_io
+from ilfo.agents import SAC, TD3, SACConfig, TD3Config, ddpg_config, make_sac, make_td3
+from ilfo.envs import episode_scores, make_env
+from ilfo.paths import DATA_DIR
+from ilfo.replay import ReplayBuffer
+from ilfo.rewards import OOPS, PWIL, OOPSConfig, Rewarder
+
+Algo = Literal["oops-td3", "oops-ddpg", "oops-sac", "pwil-td3", "td3", "sac"]
+ALGOS: tuple[str, ...] = ("oops-td3", "oops-ddpg", "oops-sac", "pwil-td3", "td3", "sac")
+CHECKPOINT_SCHEMA = 1
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """One training run. Defaults: OOPS+TD3 on Hopper-v5 from one demo, as in the paper."""
+
+    env: str = "Hopper-v5"
+    """Gymnasium environment id."""
+    algo: Algo = "oops-td3"
+    """Rewarder + agent: oops-td3, oops-ddpg, oops-sac, pwil-td3, or td3 / sac on the true task
+    reward (no demos)."""
+    demos: str | None = None
+    """Demonstration file (.npz), or None for the env's shipped expert demos
+    (data/experts/<env>/demos.npz)."""
+    num_demos: int = 1
+    """How many of the file's demos to imitate (the first N)."""
+    steps: int = 1_000_000
+    """Environment steps in total (random ones included)."""
+    start_steps: int = 10_000
+    """Uniformly random steps before the policy acts."""
+    preset: Literal["paper", "fast"] = "paper"
+    """Agent hyperparameters: paper (critics 1024-1024) or fast (critics 256-256)."""
+    seed: int = 0
+    """Seed of everything: environment, exploration, networks, demo draws."""
+    fixed_horizon: bool | None = None
+    """Run every episode to the full horizon, ignoring termination (the paper); None: on for
+    imitation, off for true-reward algos."""
+    horizon: int | None = None
+    """Episode length; None: the environment's limit (1,000 for MuJoCo)."""
+    eval_every: int = 5_000
+    """Evaluate every this many environment steps."""
+    eval_episodes: int = 10
+    """Deterministic episodes per evaluation."""
+    checkpoint_every: int = 50_000
+    """Checkpoint every this many environment steps (and on Ctrl-C)."""
+    replay_capacity: int = 1_000_000
+    """Replay buffer size in transitions."""
+    out: str = "runs"
+    """Parent directory of the run directory."""
+
+    def __post_init__(self) -> None:
+        if self.algo not in ALGOS:
+            raise ValueError(f"unknown algo {self.algo!r}; choose one of {', '.join(ALGOS)}")
+        if self.preset not in ("paper", "fast"):
+            raise ValueError(f"preset must be 'paper' or 'fast', got {self.preset!r}")
+        for name in (
+            "steps",
+            "eval_every",
+            "eval_episodes",
+            "checkpoint_every",
+            "num_demos",
+            "replay_capacity",
+        ):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.start_steps < 0:
+            raise ValueError(f"start_steps must be >= 0, got {self.start_steps}")
+
+    @property
+    def imitation(self) -> bool:
+        """Whether the algo learns from demos (True) or from the task reward (False)."""
+        return self.algo.startswith(("oops-", "pwil-"))
+
+    @property
+    def uses_fixed_horizon(self) -> bool:
+        """The resolved ``fixed_horizon``."""
+        return self.imitation if self.fixed_horizon is None else self.fixed_horizon
+
+
+class Agent(NamedTuple):
+    """What the loop needs of an agent (TD3 and SAC both provide it)."""
+
+    functions: TD3 | SAC
+    time_feature: bool
+
+
+def default_demos_path(env_id: str) -> Path:
+    """The shipped expert demos of ``env_id``."""
+    return DATA_DIR / "experts" / env_id / "demos.npz"
+
+
+def load_demos(config: TrainConfig) -> list[demo_io.Episode]:
+    """The first ``num_demos`` demos of the configured file, with clear errors."""
+    path = Path(config.demos) if config.demos else default_demos_path(config.env)
+    if not path.is_file():
+        hint = "" if config.demos else " (no shipped expert demos for this env yet: pass --demos)"
+        raise FileNotFoundError(f"no demonstration file at {path}{hint}")
+    data = demo_io.load(path)
+    if data.env_id and data.env_id != config.env:
+        raise ValueError(f"{path} holds demos of {data.env_id}, not {config.env}")
+    if config.num_demos > len(data.episodes):
+        raise ValueError(f"--num-demos {config.num_demos}: {path} has {len(data.episodes)}")
+    return data.episodes[: config.num_demos]
+
+
+def make_agent(
+    config: TrainConfig, obs_dim: int, action_dim: int, max_action: float, horizon: int
+) -> Agent:
+    """Build the agent of ``config.algo`` with the chosen preset."""
+    time_feature = config.uses_fixed_horizon
+    agent_obs_dim = obs_dim + int(time_feature)
+    kind = config.algo.split("-")[-1]
+    if kind == "sac":
+        return Agent(make_sac(SACConfig(), agent_obs_dim, action_dim, max_action), time_feature)
+    td3 = TD3Config.paper() if config.preset == "paper" else TD3Config.fast()
+    td3 = dataclasses.replace(td3, time_augmentation=time_feature, max_time=horizon)
+    if kind == "ddpg":
+        td3 = ddpg_config(td3)
+    return Agent(make_td3(td3, agent_obs_dim, action_dim, max_action), time_feature)
+
+
+def make_rewarder(config: TrainConfig, demos: list[np.ndarray]) -> Rewarder | None:
+    """The rewarder of ``config.algo``; None for the true task reward."""
+    if config.algo.startswith("oops-"):
+        return OOPS(demos, OOPSConfig(seed=config.seed))
+    if config.algo.startswith("pwil-"):
+        return PWIL(demos)
+    return None
+
+
+def run_name(config: TrainConfig) -> str:
+    """env__algo__seed__time, CleanRL style."""
+    return f"{config.env}__{config.algo}__{config.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
+
+
+def with_time(observations: np.ndarray, horizon: int) -> np.ndarray:
+    """Append remaining_steps / horizon to each of an episode's observations (T + 1, d)."""
+    remaining = (horizon - np.arange(len(observations))) / horizon
+    return np.concatenate([observations, remaining[:, None]], axis=1)
+
+
+METRIC_FIELDS = [
+    "step",
+    "episode",
+    "wall_time",
+    "steps_per_s",
+    "proxy_return",
+    "train_task_return",
+    "critic_loss",
+    "actor_loss",
+    "eval_score",
+    "eval_return",
+    "eval_score_norm",
+    "eval_return_norm",
+    "eval_ot_distance",
+]
+
+
+class Trainer:
+    """A training run in a run directory; ``Trainer.resume(run_dir)`` continues one."""
+
+    def __init__(self, config: TrainConfig, run_dir: Path, *, progress: bool = True) -> None:
+        self.config = config
+        self.run_dir = Path(run_dir)
+        self.progress = progress
+        self.env = make_env(config.env, config.uses_fixed_horizon, horizon=config.horizon)
+        self.horizon = int(self.env.spec.max_episode_steps)
+        self.eval_env = make_env(config.env, True, horizon=self.horizon)
+        obs_space, act_space = self.env.observation_space, self.env.action_space
+        self.obs_dim = int(np.prod(obs_space.shape))
+        self.action_dim = int(np.prod(act_space.shape))
+        if not np.allclose(act_space.high, -act_space.low) or not np.allclose(
+            act_space.high, act_space.high.flat[0]
+        ):
+            raise ValueError(f"{config.env}: actions must lie in a symmetric box [-a, a]")
+        self.max_action = float(act_space.high.flat[0])
+
+        if config.imitation:
+            episodes = load_demos(config)
+            self.demos = [e.observations for e in episodes]
+            if self.demos[0].shape[1] != self.obs_dim:
+                raise ValueError(
+                    f"demos have observations of dimension {self.demos[0].shape[1]}, "
+                    f"{config.env} has {self.obs_dim}"
+                )
+            returns = [e.task_return for e in episodes if e.task_return is not None]
+            self.demo_return = float(np.mean(returns)) if returns else math.nan
+            self.distance_probe: OOPS | None = OOPS(self.demos[:1])
+        else:
+            self.demos, self.demo_return, self.distance_probe = [], math.nan, None
+        self.rewarder = make_rewarder(config, self.demos)
+        self.agent = make_agent(
+            config, self.obs_dim, self.action_dim, self.max_action, self.horizon
+        )
+        agent_obs_dim = self.obs_dim + int(self.agent.time_feature)
+        self.state = self.agent.functions.init(config.seed)
+        self.buffer = ReplayBuffer(config.replay_capacity, agent_obs_dim, self.action_dim)
+        self.step = 0
+        self.episode = 0
+        self.random_states: list[np.ndarray] = []
+        self.last_eval: dict[str, float] = {}
+        self.elapsed = 0.0
+
+    # ----------------------------------------------------------------------------- the loop
+    def train(self) -> Path:
+        """Run until ``config.steps``; returns the run directory."""
+        cfg = self.config
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        config_path = self.run_dir / "config.json"
+        if not config_path.exists():
+            config_path.write_text(json.dumps(dataclasses.asdict(cfg), indent=2) + "\n")
+        bar = _progress_bar(cfg.steps, self.step, self.progress)
+        start_wall = time.perf_counter() - self.elapsed
+        next_checkpoint = (self.step // cfg.checkpoint_every + 1) * cfg.checkpoint_every
+        try:
+            with _interrupt_as_exception():
+                while self.step < cfg.steps:
+                    t0 = time.perf_counter()
+                    row = self._episode()
+                    self.elapsed = time.perf_counter() - start_wall
+                    row["wall_time"] = round(self.elapsed, 3)
+                    row["steps_per_s"] = round(row.pop("_steps") / (time.perf_counter() - t0), 1)
+                    self._write_metrics(row)
+                    bar.update(self.step - bar.n)
+                    bar.set_postfix(_postfix(row, self.last_eval), refresh=False)
+                    if self.step >= next_checkpoint or self.step >= cfg.steps:
+                        self.save_checkpoint()
+                        next_checkpoint += cfg.checkpoint_every
+        except KeyboardInterrupt:
+            self.save_checkpoint()
+            bar.close()
+            print(
+                f"\ninterrupted: checkpoint at step {self.step}; continue with "
+                f"`ilfo train --resume {self.run_dir}`"
+            )
+            raise
+        bar.close()
+        self._save_policy()
+        plot_runs([self.run_dir], self.run_dir / "learning_curve.png")
+        return self.run_dir
+
+    def _episode(self) -> dict[str, Any]:
+        """Collect, reward, store and learn from one episode; evaluate when due."""
+        cfg = self.config
+        funcs = self.agent.functions
+        random_phase = self.step < cfg.start_steps
+        if not random_phase and not bool(self.state.normalizer_set):
+            self._fit_normalizer()
+        rng = np.random.default_rng([cfg.seed, self.episode])
+        env_seed = int(rng.integers(2**31))
+        obs, _ = self.env.reset(seed=env_seed)
+        observations, actions, task_rewards, env_terminated = [obs], [], [], []
+        explore_key = jax.random.fold_in(jax.random.PRNGKey(cfg.seed), self.episode)
+        terminated = False
+        for t in range(self.horizon):
+            if random_phase:
+                action = rng.uniform(-self.max_action, self.max_action, self.action_dim)
+            else:
+                agent_obs = self._agent_obs(obs, t)
+                key = jax.random.fold_in(explore_key, t)
+                action = np.asarray(funcs.act(self.state, agent_obs, key), dtype=np.float64)
+            obs, reward, terminated, truncated, info = self.env.step(action)
+            observations.append(obs)
+            actions.append(action)
+            task_rewards.append(float(reward))
+            env_terminated.append(bool(info.get("env_terminated", terminated)))
+            if terminated or truncated:
+                break
+        observations = np.asarray(observations)
+        num_steps = len(actions)
+        self.step += num_steps
+        self.episode += 1
+
+        if self.rewarder is not None:
+            rewards = self.rewarder(observations).rewards
+        else:
+            rewards = np.asarray(task_rewards)
+            if cfg.uses_fixed_horizon:
+                rewards = np.where(env_terminated, 0.0, rewards)
+        agent_obs = (
+            with_time(observations, self.horizon) if self.agent.time_feature else observations
+        )
+        # The paper's code cuts bootstrapping at the end of a fixed-horizon episode (its time
+        # feature is then 0); standard mode bootstraps through truncation only.
+        done = terminated or (cfg.uses_fixed_horizon and num_steps == self.horizon)
+        self.buffer.add_episode(agent_obs, np.asarray(actions), rewards, terminated=done)
+        if random_phase:
+            self.random_states.append(observations[:-1])
+
+        row: dict[str, Any] = {
+            "step": self.step,
+            "episode": self.episode,
+            "proxy_return": round(float(np.sum(rewards)), 4),
+            "train_task_return": round(float(np.sum(task_rewards)), 4),
+            "_steps": num_steps,
+        }
+        if not random_phase:
+            self.state, metrics = self._update(num_steps)
+            row["critic_loss"] = round(metrics["critic_loss"], 5)
+            row["actor_loss"] = round(metrics["actor_loss"], 5)
+        if self.step // cfg.eval_every > (self.step - num_steps) // cfg.eval_every:
+            self.last_eval = self.evaluate()
+            row.update(self.last_eval)
+        return row
+
+    def _update(self, num_updates: int) -> tuple[Any, dict[str, float]]:
+        """``num_updates`` agent updates, run as jitted chunks of power-of-two sizes.
+
+        ``update`` compiles once per number of updates; episodes of every length would each
+        compile anew, whereas powers of two compile at most log2(horizon) + 1 times. Every update
+        draws its keys from the state, so chunks give exactly the updates one call would.
+        """
+        state, totals = self.state, {"critic_loss": 0.0, "actor_loss": 0.0}
+        remaining, chunk = num_updates, 1 << (num_updates.bit_length() - 1)
+        while remaining:
+            if chunk <= remaining:
+                state, metrics = self.agent.functions.update(
+                    state, self.buffer.data, self.buffer.size, num_updates=chunk
+                )
+                for name in totals:
+                    totals[name] += float(metrics[name]) * chunk
+                remaining -= chunk
+            chunk >>= 1
+        return state, {name: total / num_updates for name, total in totals.items()}
+
+    def _agent_obs(self, obs: np.ndarray, t: int) -> np.ndarray:
+        if self.agent.time_feature:
+            return np.append(obs, (self.horizon - t) / self.horizon).astype(np.float32)
+        return np.asarray(obs, dtype=np.float32)
+
+    def _fit_normalizer(self) -> None:
+        """Fix the networks' normaliser once, when the policy takes over (paper's code): mean of
+        the random states, std of expert plus random states floored at 0.33."""
+        random_states = (
+            np.concatenate(self.random_states)
+            if self.random_states
+            else np.zeros((1, self.obs_dim))
+        )
+        mean = random_states.mean(axis=0)
+        pool = [random_states] + [d[:-1] for d in self.demos]
+        std = np.maximum(np.concatenate(pool).std(axis=0), 0.33)
+        if self.agent.time_feature:  # the time feature is already in [0, 1]
+            mean, std = np.append(mean, 0.0), np.append(std, 1.0)
+        self.state = self.agent.functions.set_normalizer(self.state, mean, std)
+        self.random_states = []
+
+    # ------------------------------------------------------------------------ evaluation
+    def evaluate(self) -> dict[str, float]:
+        """Deterministic fixed-horizon episodes: both scores, normalised, and OT distance."""
+        scores, returns, distances = [], [], []
+        for k in range(self.config.eval_episodes):
+            rollout = rollout_policy(
+                self.eval_env,
+                self.agent,
+                self.state,
+                self.horizon,
+                seed=10_000_019 * (self.config.seed + 1) + k,
+            )
+            fixed, standard = episode_scores(rollout.rewards, rollout.env_terminated)
+            scores.append(fixed)
+            returns.append(standard)
+            if self.distance_probe is not None:
+                distances.append(self.distance_probe(rollout.observations).distance)
+        out = {
+            "eval_score": round(float(np.mean(scores)), 3),
+            "eval_return": round(float(np.mean(returns)), 3),
+        }
+        if not math.isnan(self.demo_return):
+            out["eval_score_norm"] = round(out["eval_score"] / self.demo_return, 4)
+            out["eval_return_norm"] = round(out["eval_return"] / self.demo_return, 4)
+        if distances:
+            out["eval_ot_distance"] = round(float(np.mean(distances)), 5)
+        return out
+
+    # ------------------------------------------------------------------ files and resume
+    def _write_metrics(self, row: dict[str, Any]) -> None:
+        path = self.run_dir / "metrics.csv"
+        new = not path.exists()
+        with path.open("a", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=METRIC_FIELDS)
+            if new:
+                writer.writeheader()
+            writer.writerow({k: row.get(k, "") for k in METRIC_FIELDS})
+
+    def save_checkpoint(self) -> Path:
+        """Write the run's whole state at this episode boundary (atomically: a crash while
+        writing leaves the previous checkpoint in place)."""
+        root = self.run_dir / "checkpoints"
+        final = root / f"step_{self.step:09d}"
+        tmp = root / f".tmp_step_{self.step:09d}"
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir(parents=True)
+        (tmp / "agent.msgpack").write_bytes(flax.serialization.to_bytes(self.state))
+        self.buffer.save(tmp / "replay.npz")
+        meta = {
+            "schema": CHECKPOINT_SCHEMA,
+            "step": self.step,
+            "episode": self.episode,
+            "elapsed": self.elapsed,
+            "last_eval": self.last_eval,
+            "rewarder_rng": _rng_state(self.rewarder),
+        }
+        (tmp / "state.json").write_text(json.dumps(meta))
+        if self.random_states:
+            np.savez(tmp / "random_states.npz", *self.random_states)
+        shutil.rmtree(final, ignore_errors=True)
+        os.replace(tmp, final)
+        latest_tmp = root / ".latest.tmp"
+        latest_tmp.write_text(final.name)
+        os.replace(latest_tmp, root / "latest")
+        for old in root.glob("step_*"):
+            if old != final:
+                shutil.rmtree(old, ignore_errors=True)
+        return final
+
+    @classmethod
+    def resume(
+        cls, run_dir: str | Path, *, progress: bool = True, steps: int | None = None
+    ) -> Trainer:
+        """Reload a run from its last checkpoint; ``steps`` may extend its budget."""
+        run_dir = Path(run_dir)
+        config_path = run_dir / "config.json"
+        if not config_path.is_file():
+            raise FileNotFoundError(f"{run_dir} is not a run directory (no config.json)")
+        raw = json.loads(config_path.read_text())
+        if steps is not None:
+            raw["steps"] = steps
+            config_path.write_text(json.dumps(raw, indent=2) + "\n")
+        config = TrainConfig(**raw)
+        trainer = cls(config, run_dir, progress=progress)
+        latest = run_dir / "checkpoints" / "latest"
+        if not latest.is_file():
+            raise FileNotFoundError(f"{run_dir} has no checkpoint to resume from")
+        ckpt = run_dir / "checkpoints" / latest.read_text().strip()
+        meta = json.loads((ckpt / "state.json").read_text())
+        if meta.get("schema") != CHECKPOINT_SCHEMA:
+            raise ValueError(f"{ckpt}: checkpoint schema {meta.get('schema')}, expected 1")
+        trainer.state = flax.serialization.from_bytes(
+            trainer.state, (ckpt / "agent.msgpack").read_bytes()
+        )
+        trainer.buffer = ReplayBuffer.load(ckpt / "replay.npz")
+        trainer.step, trainer.episode = int(meta["step"]), int(meta["episode"])
+        trainer.elapsed = float(meta["elapsed"])
+        trainer.last_eval = meta["last_eval"]
+        if meta["rewarder_rng"] is not None and trainer.rewarder is not None:
+            trainer.rewarder.rng.bit_generator.state = meta["rewarder_rng"]  # type: ignore[attr-defined]
+        random_path = ckpt / "random_states.npz"
+        if random_path.is_file():
+            with np.load(random_path, allow_pickle=False) as f:
+                trainer.random_states = [f[k] for k in sorted(f.files, key=_arr_index)]
+        _truncate_metrics(run_dir / "metrics.csv", trainer.step)
+        return trainer
+
+    def _save_policy(self) -> None:
+        (self.run_dir / "policy.msgpack").write_bytes(flax.serialization.to_bytes(self.state))
+
+
+# ------------------------------------------------------------------------------ helpers
+class Rollout(NamedTuple):
+    """One evaluation episode: observations (T + 1, d), task rewards (T,), terminations (T,),
+    and rendered frames (empty unless asked for)."""
+
+    observations: np.ndarray
+    rewards: np.ndarray
+    env_terminated: np.ndarray
+    frames: list[np.ndarray]
+
+
+def rollout_policy(
+    env: Any, agent: Agent, state: Any, horizon: int, seed: int, render: bool = False
+) -> Rollout:
+    """A deterministic fixed-horizon episode of the agent's policy."""
+    obs, _ = env.reset(seed=seed)
+    observations, rewards, terminated_flags = [obs], [], []
+    frames = []
+    for t in range(horizon):
+        agent_obs = np.append(obs, (horizon - t) / horizon) if agent.time_feature else obs
+        action = np.asarray(agent.functions.act(state, agent_obs.astype(np.float32)))
+        obs, reward, terminated, truncated, info = env.step(action.astype(np.float64))
+        if render:
+            frames.append(env.render())
+        observations.append(obs)
+        rewards.append(float(reward))
+        terminated_flags.append(bool(info.get("env_terminated", terminated)))
+        if terminated or truncated:
+            break
+    return Rollout(
+        np.asarray(observations), np.asarray(rewards), np.asarray(terminated_flags), frames
+    )
+
+
+def _rng_state(rewarder: Any) -> dict | None:
+    rng = getattr(rewarder, "rng", None)
+    return None if rng is None else rng.bit_generator.state
+
+
+def _arr_index(name: str) -> int:
+    return int(name.split("_")[-1])
+
+
+def _truncate_metrics(path: Path, step: int) -> None:
+    """Drop rows logged after the checkpoint: the resumed run writes them again."""
+    if not path.is_file():
+        return
+    with path.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=METRIC_FIELDS)
+        writer.writeheader()
+        writer.writerows(r for r in rows if int(r["step"]) <= step)
+
+
+@contextmanager
+def _interrupt_as_exception() -> Iterator[None]:
+    """SIGTERM behaves like Ctrl-C, so a killed job also checkpoints."""
+    previous = signal.getsignal(signal.SIGTERM)
+
+    def handler(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    try:
+        signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread
+        previous = None
+    try:
+        yield
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _progress_bar(total: int, initial: int, enabled: bool):
+    from tqdm import tqdm
+
+    return tqdm(
+        total=total,
+        initial=initial,
+        disable=not enabled,
+        unit="step",
+        dynamic_ncols=True,
+        smoothing=0.1,
+    )
+
+
+def _postfix(row: dict[str, Any], last_eval: dict[str, float]) -> dict[str, Any]:
+    out: dict[str, Any] = {"sps": row.get("steps_per_s"), "proxy": row.get("proxy_return")}
+    if "eval_score_norm" in last_eval:
+        out["eval"] = last_eval["eval_score_norm"]
+    elif "eval_score" in last_eval:
+        out["eval"] = last_eval["eval_score"]
+    return out
+
+
+def read_metrics(run_dir: Path) -> list[dict[str, str]]:
+    """The rows of a run's metrics.csv."""
+    with (Path(run_dir) / "metrics.csv").open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def plot_runs(run_dirs: list[Path], out: Path, metric: str | None = None) -> Path:
+    """Evaluation curves of runs, grouped by env and algo: mean over seeds with min-max band.
+
+    ``metric`` defaults to the normalised score where demos gave a return, else the raw score.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    groups: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+    chosen = metric
+    for run_dir in run_dirs:
+        cfg = json.loads((Path(run_dir) / "config.json").read_text())
+        rows = [r for r in read_metrics(run_dir) if r.get("eval_score")]
+        if not rows:
+            continue
+        name = chosen or ("eval_score_norm" if rows[0].get("eval_score_norm") else "eval_score")
+        chosen = name
+        steps = np.array([float(r["step"]) for r in rows])
+        values = np.array([float(r[name]) for r in rows])
+        groups.setdefault(f"{cfg['env']} {cfg['algo']}", []).append((steps, values))
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for label, curves in groups.items():
+        length = min(len(s) for s, _ in curves)
+        steps = curves[0][0][:length]
+        values = np.stack([v[:length] for _, v in curves])
+        mean = values.mean(axis=0)
+        ax.plot(steps, mean, label=f"{label} ({len(curves)} seed{'s' * (len(curves) > 1)})")
+        if len(curves) > 1:
+            ax.fill_between(steps, values.min(axis=0), values.max(axis=0), alpha=0.25)
+    ax.set_xlabel("environment steps")
+    ax.set_ylabel(chosen or "eval_score")
+    ax.grid(alpha=0.3)
+    if groups:
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out

@@ -1,0 +1,46 @@
+import numpy as np
+import pytest
+
+from ilfo.envs import episode_scores, make_env
+
+
+def _run(env, seed):
+    env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    flags, steps = [], 0
+    while True:
+        _, _, terminated, truncated, info = env.step(rng.uniform(-1, 1, 3))
+        steps += 1
+        flags.append(info.get("env_terminated", terminated))
+        if terminated or truncated:
+            return steps, terminated, truncated, flags
+
+
+def test_fixed_horizon_ignores_termination_and_records_it():
+    steps, terminated, truncated, flags = _run(make_env("Hopper-v5", True, horizon=300), 0)
+    assert steps == 300 and truncated and not terminated
+    assert any(flags)  # random actions make Hopper fall: the fall is recorded, not obeyed
+
+
+def test_standard_mode_stops_at_termination():
+    steps, terminated, truncated, _ = _run(make_env("Hopper-v5", False, horizon=300), 0)
+    assert terminated and not truncated and steps < 300
+
+
+def test_same_seed_same_episode():
+    a = make_env("Hopper-v5", True, horizon=50)
+    b = make_env("Hopper-v5", True, horizon=50)
+    np.testing.assert_array_equal(a.reset(seed=3)[0], b.reset(seed=3)[0])
+
+
+def test_episode_scores():
+    rewards = np.array([1.0, 2.0, 3.0, 4.0])
+    fixed, standard = episode_scores(rewards, np.array([False, True, False, True]))
+    assert fixed == 4.0  # rewards of terminated steps are zeroed, the episode goes on
+    assert standard == 3.0  # stops at (and includes) the first termination
+    assert episode_scores(rewards, np.zeros(4, bool)) == (10.0, 10.0)
+
+
+def test_unknown_env_is_a_clear_error():
+    with pytest.raises(ValueError, match="unknown environment"):
+        make_env("NoSuchEnv-v0")
