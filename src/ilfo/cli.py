@@ -27,7 +27,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     _add_train_parser(sub)
     _add_eval_parser(sub)
     _add_plot_parser(sub)
+    _add_expert_parser(sub)
     _add_reward_parser(sub)
+    _add_demos_parser(sub)
     args = parser.parse_args(argv)
     try:
         return args.run(args)
@@ -108,6 +110,90 @@ def _run_eval(args: argparse.Namespace) -> int:
     else:
         for key, value in result.items():
             print(f"{key:>20s}: {value}")
+    return 0
+
+
+def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("expert", help="Train, export and evaluate SAC experts.")
+    esub = p.add_subparsers(dest="expert_command", required=True)
+    t = esub.add_parser(
+        "train",
+        help="SAC on the task reward, checkpointed and resumable in segments.",
+        description=(
+            "Train a SAC expert on the task reward in runs/experts/<ENV>__sac__<seed>/ (or "
+            "--run-dir). Stop any time (Ctrl-C checkpoints) and continue with --resume, "
+            "possibly with a larger --steps."
+        ),
+    )
+    t.add_argument("env", help="environment id, e.g. Hopper-v5")
+    t.add_argument("--steps", type=int, default=None, help="total steps (default 1,000,000)")
+    t.add_argument("--seed", type=int, default=0, help="seed")
+    t.add_argument("--resume", action="store_true", help="continue the existing run")
+    t.add_argument("--run-dir", default=None, help="run directory (default: see above)")
+    t.add_argument("--checkpoint-every", type=int, default=25_000, help="steps between checkpoints")
+    t.add_argument("--no-progress", action="store_true", help="no progress bar")
+    t.set_defaults(run=_run_expert_train)
+    x = esub.add_parser("export", help="Export a run's policy as the env's shipped expert.")
+    x.add_argument("run_dir", help="the expert's run directory")
+    x.add_argument("--out", default=None, help="expert directory (default data/experts/<env>)")
+    x.add_argument("-n", "--num-demos", type=int, default=10, help="demos to collect")
+    x.set_defaults(run=_run_expert_export)
+    e = esub.add_parser("eval", help="Mean and std return of a shipped (or given) expert.")
+    e.add_argument("env", help="environment id with a shipped expert, or an expert directory")
+    e.add_argument("--episodes", type=int, default=10, help="episodes")
+    e.add_argument("--json", action="store_true", help="one JSON line")
+    e.set_defaults(run=_run_expert_eval)
+
+
+def _run_expert_train(args: argparse.Namespace) -> int:
+    from ilfo.train import TrainConfig, Trainer
+
+    run_dir = Path(args.run_dir or Path("runs") / "experts" / f"{args.env}__sac__{args.seed}")
+    if args.resume:
+        trainer = Trainer.resume(run_dir, progress=not args.no_progress, steps=args.steps)
+    else:
+        if (run_dir / "config.json").exists():
+            raise ValueError(f"{run_dir} exists: continue it with --resume, or pass --run-dir")
+        config = TrainConfig(
+            env=args.env,
+            algo="sac",
+            seed=args.seed,
+            steps=args.steps or 1_000_000,
+            eval_every=10_000,
+            checkpoint_every=args.checkpoint_every,
+        )
+        trainer = Trainer(config, run_dir, progress=not args.no_progress)
+    print(f"run directory: {run_dir}")
+    trainer.train()
+    print(f"done: {json.dumps(trainer.last_eval)}")
+    return 0
+
+
+def _run_expert_export(args: argparse.Namespace) -> int:
+    from ilfo.experts import DEMOS_FILE, collect_demos, export_expert, load_expert, write_card
+
+    out = export_expert(args.run_dir, args.out)
+    collect_demos(load_expert(out), args.num_demos, out / DEMOS_FILE)
+    card = write_card(out)
+    print(
+        f"wrote {out}: return {card['return_mean']:.1f} +- {card['return_std']:.1f} over "
+        f"{card['num_demos']} demos after {card['steps_trained']} steps"
+    )
+    return 0
+
+
+def _run_expert_eval(args: argparse.Namespace) -> int:
+    from ilfo.experts import evaluate_expert
+
+    if args.episodes < 1:
+        raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
+    result = evaluate_expert(args.env, args.episodes)
+    print(
+        json.dumps(result)
+        if args.json
+        else f"{result['env_id']}: return {result['return_mean']:.1f} +- {result['return_std']:.1f}"
+        f" (fixed-horizon score {result['score_mean']:.1f}) over {args.episodes} episodes"
+    )
     return 0
 
 
@@ -216,6 +302,88 @@ def _run_reward(args: argparse.Namespace) -> int:
                 f"{name:30s} {out.distance:12.4f} {row['mean_reward']:12.4f} "
                 f"{out.coupling.iterations!s:>6s} {out.coupling.converged!s:>5s} {ms:8.1f}"
             )
+    return 0
+
+
+def _add_demos_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "demos",
+        help="Inspect and convert demonstration files (ilfo .npz, Minari, D4RL, imitation).",
+    )
+    dsub = p.add_subparsers(dest="demos_command", required=True)
+    i = dsub.add_parser(
+        "info",
+        help="Episodes, lengths, dims, returns, env id and provenance of a demo file.",
+        description="Describe a demonstration file of any format `ilfo demos convert` reads.",
+    )
+    i.add_argument("file", help="ilfo/imitation .npz, Minari/D4RL .hdf5, or a Minari dataset dir")
+    i.add_argument("--json", action="store_true", help="print one JSON object")
+    i.set_defaults(run=_run_demos_info)
+    c = dsub.add_parser(
+        "convert",
+        help="Convert a Minari, D4RL or imitation file (or an ilfo one) to ilfo's .npz.",
+        description=(
+            "Read IN (ilfo or imitation .npz, Minari or D4RL HDF5, Minari dataset directory; the "
+            "format is detected from the contents) and write OUT in ilfo's .npz format. D4RL and "
+            "imitation files do not record their environment: pass --env-id."
+        ),
+    )
+    c.add_argument("input", metavar="IN", help="demonstration file or Minari dataset directory")
+    c.add_argument("output", metavar="OUT", help="ilfo .npz to write")
+    c.add_argument("--env-id", default=None, help="environment id to record (overrides IN's)")
+    c.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
+    c.set_defaults(run=_run_demos_convert)
+
+
+def _run_demos_info(args: argparse.Namespace) -> int:
+    summary = demos.summarize(demos.load_any(args.file))
+    if args.json:
+        print(json.dumps(summary))
+        return 0
+    print(f"{args.file} ({demos.detect_format(args.file)})")
+    rows = [
+        ("env id", summary["env_id"] or "(not recorded)"),
+        ("episodes", summary["episodes"]),
+        ("transitions", summary["transitions"]),
+        (
+            "length (T)",
+            f"min {summary['length_min']}  mean {summary['length_mean']:.1f}  "
+            f"max {summary['length_max']}",
+        ),
+        ("obs dim", summary["obs_dim"]),
+        ("action dim", "(no actions)" if summary["action_dim"] is None else summary["action_dim"]),
+    ]
+    if summary["return_mean"] is None:
+        rows.append(("return", "(no rewards)"))
+    else:
+        rows.append(
+            (
+                "return",
+                f"mean {summary['return_mean']:.2f}  std {summary['return_std']:.2f}  "
+                f"min {summary['return_min']:.2f}  max {summary['return_max']:.2f}",
+            )
+        )
+    rows.append(("provenance", json.dumps(summary["provenance"], sort_keys=True)))
+    for key, value in rows:
+        print(f"{key:>12s}: {value}")
+    return 0
+
+
+def _run_demos_convert(args: argparse.Namespace) -> int:
+    out = Path(args.output)
+    if out.suffix != ".npz":
+        raise ValueError(f"OUT must end in .npz, got {out}")
+    if out.exists() and not args.force:
+        raise ValueError(f"{out} exists: pass --force to overwrite it")
+    data = demos.load_any(args.input)
+    env_id = args.env_id or data.env_id
+    if not env_id:
+        raise ValueError(f"{args.input} does not record its environment: pass --env-id")
+    provenance = dict(data.provenance)
+    if args.env_id and data.env_id and data.env_id != args.env_id:
+        provenance["env_id_overridden_from"] = data.env_id
+    demos.save(out, data.episodes, env_id, provenance)
+    print(f"wrote {out}: {len(data.episodes)} episodes of {env_id}")
     return 0
 
 

@@ -452,17 +452,26 @@ class Trainer:
     def resume(
         cls, run_dir: str | Path, *, progress: bool = True, steps: int | None = None
     ) -> Trainer:
-        """Reload a run from its last checkpoint; ``steps`` may extend its budget."""
+        """Reload a run from its last checkpoint to continue it; ``steps`` may extend its
+        budget. Rows of metrics.csv logged after the checkpoint are dropped (they will be
+        logged again)."""
         run_dir = Path(run_dir)
-        config_path = run_dir / "config.json"
-        if not config_path.is_file():
-            raise FileNotFoundError(f"{run_dir} is not a run directory (no config.json)")
-        raw = json.loads(config_path.read_text())
         if steps is not None:
+            raw = _read_config(run_dir)
             raw["steps"] = steps
-            config_path.write_text(json.dumps(raw, indent=2) + "\n")
-        config = TrainConfig(**raw)
-        trainer = cls(config, run_dir, progress=progress)
+            TrainConfig(**raw)  # validate before writing
+            (run_dir / "config.json").write_text(json.dumps(raw, indent=2) + "\n")
+        trainer = cls.from_checkpoint(run_dir, progress=progress)
+        _truncate_metrics(run_dir / "metrics.csv", trainer.step)
+        return trainer
+
+    @classmethod
+    def from_checkpoint(
+        cls, run_dir: str | Path, *, progress: bool = True, with_replay: bool = True
+    ) -> Trainer:
+        """A trainer in the state of the run's last checkpoint; changes no file."""
+        run_dir = Path(run_dir)
+        trainer = cls(TrainConfig(**_read_config(run_dir)), run_dir, progress=progress)
         latest = run_dir / "checkpoints" / "latest"
         if not latest.is_file():
             raise FileNotFoundError(f"{run_dir} has no checkpoint to resume from")
@@ -473,7 +482,8 @@ class Trainer:
         trainer.state = flax.serialization.from_bytes(
             trainer.state, (ckpt / "agent.msgpack").read_bytes()
         )
-        trainer.buffer = ReplayBuffer.load(ckpt / "replay.npz")
+        if with_replay:
+            trainer.buffer = ReplayBuffer.load(ckpt / "replay.npz")
         trainer.step, trainer.episode = int(meta["step"]), int(meta["episode"])
         trainer.elapsed = float(meta["elapsed"])
         trainer.last_eval = meta["last_eval"]
@@ -483,7 +493,6 @@ class Trainer:
         if random_path.is_file():
             with np.load(random_path, allow_pickle=False) as f:
                 trainer.random_states = [f[k] for k in sorted(f.files, key=_arr_index)]
-        _truncate_metrics(run_dir / "metrics.csv", trainer.step)
         return trainer
 
     def _save_policy(self) -> None:
@@ -522,6 +531,13 @@ def rollout_policy(
     return Rollout(
         np.asarray(observations), np.asarray(rewards), np.asarray(terminated_flags), frames
     )
+
+
+def _read_config(run_dir: Path) -> dict[str, Any]:
+    path = run_dir / "config.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"{run_dir} is not a run directory (no config.json)")
+    return json.loads(path.read_text())
 
 
 def _rng_state(rewarder: Any) -> dict | None:

@@ -1,0 +1,197 @@
+"""Expert policies: export a trained run as a shipped expert, load it, and collect demonstrations.
+
+A shipped expert lives in ``data/experts/<env_id>/``:
+  ``policy.msgpack``  the actor's parameters and observation normaliser (flax serialization)
+  ``expert.json``     how to rebuild the policy (the run's TrainConfig) and its training record
+  ``demos.npz``       demonstrations (ilfo npz: observations, with actions and rewards kept for
+                      analysis only)
+  ``card.json``       env id, algorithm, steps trained, seed, date, return mean and std over the
+                      demos, sha256 of each file
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import flax.serialization
+import jax
+import numpy as np
+
+from ilfo import demos as demo_io
+from ilfo.envs import episode_scores, make_env
+from ilfo.paths import DATA_DIR
+from ilfo.train import Agent, TrainConfig, Trainer, make_agent, rollout_policy
+
+POLICY_FILE, EXPERT_FILE, DEMOS_FILE, CARD_FILE = (
+    "policy.msgpack",
+    "expert.json",
+    "demos.npz",
+    "card.json",
+)
+
+
+def expert_dir(env_id: str) -> Path:
+    """Where the shipped expert of ``env_id`` lives."""
+    return DATA_DIR / "experts" / env_id
+
+
+@dataclasses.dataclass(frozen=True)
+class ExpertPolicy:
+    """A deterministic policy rebuilt from an exported expert."""
+
+    config: TrainConfig
+    agent: Agent
+    state: Any
+    horizon: int
+
+    def rollout(self, seed: int) -> Any:
+        """One deterministic fixed-horizon episode (a ``train.Rollout``)."""
+        env = make_env(self.config.env, True, horizon=self.horizon)
+        return rollout_policy(env, self.agent, self.state, self.horizon, seed=seed)
+
+
+def export_expert(run_dir: str | Path, out_dir: str | Path | None = None) -> Path:
+    """Export a run's latest policy (actor and normaliser only) as an expert."""
+    run_dir = Path(run_dir)
+    trainer = _trainer_with_latest_state(run_dir)
+    config = trainer.config
+    out = Path(out_dir) if out_dir else expert_dir(config.env)
+    out.mkdir(parents=True, exist_ok=True)
+    policy = {
+        "actor_params": trainer.state.actor_params,
+        "obs_mean": trainer.state.obs_mean,
+        "obs_std": trainer.state.obs_std,
+    }
+    (out / POLICY_FILE).write_bytes(flax.serialization.to_bytes(policy))
+    record = {
+        "train_config": dataclasses.asdict(config),
+        "steps_trained": trainer.step,
+        "hours_trained": round(trainer.elapsed / 3600, 3),
+        "horizon": trainer.horizon,
+        "source_run": run_dir.name,
+        "last_eval": trainer.last_eval,
+    }
+    (out / EXPERT_FILE).write_text(json.dumps(record, indent=2) + "\n")
+    return out
+
+
+def load_expert(path: str | Path) -> ExpertPolicy:
+    """Load an exported expert from its directory (or an env id with a shipped expert)."""
+    path = Path(path)
+    if not path.is_dir() and (expert_dir(str(path)) / EXPERT_FILE).is_file():
+        path = expert_dir(str(path))
+    if not (path / EXPERT_FILE).is_file() or not (path / POLICY_FILE).is_file():
+        raise FileNotFoundError(f"no expert at {path} (needs {EXPERT_FILE} and {POLICY_FILE})")
+    record = json.loads((path / EXPERT_FILE).read_text())
+    config = TrainConfig(**record["train_config"])
+    env = make_env(config.env, True, horizon=record["horizon"])
+    obs_dim = int(np.prod(env.observation_space.shape))
+    action_dim = int(np.prod(env.action_space.shape))
+    agent = make_agent(
+        config, obs_dim, action_dim, float(env.action_space.high.flat[0]), record["horizon"]
+    )
+    state = agent.functions.init(config.seed)
+    template = {
+        "actor_params": state.actor_params,
+        "obs_mean": state.obs_mean,
+        "obs_std": state.obs_std,
+    }
+    try:
+        policy = flax.serialization.from_bytes(template, (path / POLICY_FILE).read_bytes())
+    except (ValueError, KeyError) as err:
+        raise ValueError(f"{path / POLICY_FILE} does not match its expert.json: {err}") from err
+    state = state.replace(**policy)
+    return ExpertPolicy(config, agent, state, int(record["horizon"]))
+
+
+def collect_demos(
+    expert: ExpertPolicy, num_episodes: int, out: str | Path, first_seed: int = 0
+) -> list[demo_io.Episode]:
+    """Deterministic full-length expert rollouts, saved to ``out`` (ilfo npz)."""
+    if num_episodes < 1:
+        raise ValueError(f"need at least one episode, got {num_episodes}")
+    episodes = []
+    for k in range(num_episodes):
+        rollout = expert.rollout(seed=first_seed + k)
+        actions = _replay_actions(expert, rollout.observations)
+        episodes.append(demo_io.Episode(rollout.observations, actions, rollout.rewards))
+    demo_io.save(
+        out,
+        episodes,
+        expert.config.env,
+        provenance={
+            "expert_algo": expert.config.algo,
+            "seeds": [first_seed + k for k in range(num_episodes)],
+            "fixed_horizon": True,
+            "horizon": expert.horizon,
+            "deterministic": True,
+            "created": time.strftime("%Y-%m-%d"),
+        },
+    )
+    return episodes
+
+
+def write_card(directory: str | Path) -> dict[str, Any]:
+    """Write ``card.json`` for an expert directory with policy, expert.json and demos."""
+    directory = Path(directory)
+    record = json.loads((directory / EXPERT_FILE).read_text())
+    data = demo_io.load(directory / DEMOS_FILE)
+    returns = np.array([e.task_return for e in data.episodes])
+    cfg = record["train_config"]
+    card = {
+        "env_id": cfg["env"],
+        "algorithm": cfg["algo"],
+        "steps_trained": record["steps_trained"],
+        "hours_trained": record.get("hours_trained"),
+        "seed": cfg["seed"],
+        "date": time.strftime("%Y-%m-%d"),
+        "num_demos": len(data.episodes),
+        "demo_length": int(len(data.episodes[0].observations) - 1),
+        "return_mean": float(returns.mean()),
+        "return_std": float(returns.std()),
+        "sha256": {
+            name: hashlib.sha256((directory / name).read_bytes()).hexdigest()
+            for name in (POLICY_FILE, EXPERT_FILE, DEMOS_FILE)
+        },
+    }
+    (directory / CARD_FILE).write_text(json.dumps(card, indent=2) + "\n")
+    return card
+
+
+def evaluate_expert(path: str | Path, episodes: int, first_seed: int = 1000) -> dict[str, Any]:
+    """Mean and std of an expert's fixed-horizon score and standard return."""
+    expert = load_expert(path)
+    scores, returns = [], []
+    for k in range(episodes):
+        rollout = expert.rollout(seed=first_seed + k)
+        fixed, standard = episode_scores(rollout.rewards, rollout.env_terminated)
+        scores.append(fixed)
+        returns.append(standard)
+    return {
+        "env_id": expert.config.env,
+        "episodes": episodes,
+        "score_mean": float(np.mean(scores)),
+        "score_std": float(np.std(scores)),
+        "return_mean": float(np.mean(returns)),
+        "return_std": float(np.std(returns)),
+    }
+
+
+def _replay_actions(expert: ExpertPolicy, observations: np.ndarray) -> np.ndarray:
+    """The deterministic actions the expert took along its own observations (T, a)."""
+    obs = observations[:-1]
+    if expert.agent.time_feature:
+        t = np.arange(len(obs))
+        obs = np.concatenate([obs, ((expert.horizon - t) / expert.horizon)[:, None]], axis=1)
+    return np.asarray(
+        jax.device_get(expert.agent.functions.act(expert.state, obs.astype(np.float32)))
+    )
+
+
+def _trainer_with_latest_state(run_dir: Path) -> Trainer:
+    return Trainer.from_checkpoint(run_dir, progress=False, with_replay=False)
