@@ -1,9 +1,9 @@
 """Learning benchmark: OOPS+TD3 on Hopper-v5 from 1 demo, several seeds, normalised return vs steps.
 
-Each seed is a normal `ilfo train` run in a fixed directory (bench_runs/learning/<env>__<algo>__<seed>),
-so the benchmark is resumable: run it again (with the same or a larger --steps) and every seed
-continues from its last checkpoint. Target (issue): >= 0.8 normalised return by 300k steps; the
-paper reaches 0.98 by 1M.
+Each seed is a normal `ilfo train` run in a fixed directory,
+bench_runs/learning/<env>__<algo>__<seed>, so the benchmark is resumable: run it again (with the
+same or a larger --steps) and every seed continues from its last checkpoint.
+Target (issue): >= 0.8 normalised return by 300k steps; the paper reaches 0.98 by 1M.
 
     python bench/learning.py --steps 300000 --seeds 0 1 2          # hours on 2 cores
     python bench/learning.py --steps 300000 --seeds 0 1 2 --json   # one JSON line per eval
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ilfo.train import Trainer, TrainConfig, plot_runs, read_metrics
+from ilfo.train import TrainConfig, Trainer, plot_runs, read_metrics
 
 
 def machine() -> str:

@@ -69,6 +69,25 @@ def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     capsys.readouterr()
     assert main(["expert", "eval", str(out), "--episodes", "1", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["episodes"] == 1
+    collected = tmp_path / "collected.npz"
+    assert main(["demos", "collect", "--expert", str(out), "-n", "2", "--out", str(collected)]) == 0
+    assert len(demos.load(collected).episodes) == 2
+    assert (
+        main(
+            [
+                "demos",
+                "collect",
+                "--expert",
+                str(out),
+                "--env",
+                "Walker2d-v5",
+                "--out",
+                str(collected),
+            ]
+        )
+        == 2
+    )
+    assert "not Walker2d-v5" in capsys.readouterr().err
 
 
 def test_missing_expert_is_a_clear_error(tmp_path, capsys):

@@ -333,6 +333,36 @@ def _add_demos_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--env-id", default=None, help="environment id to record (overrides IN's)")
     c.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
     c.set_defaults(run=_run_demos_convert)
+    k = dsub.add_parser(
+        "collect",
+        help="Deterministic full-length rollouts of an expert policy, saved as ilfo .npz.",
+        description=(
+            "Roll out an exported expert (a directory with expert.json and policy.msgpack, or an "
+            "env id with a shipped expert) deterministically for the full horizon. Observations "
+            "are what a learner sees; actions and rewards are kept for analysis only."
+        ),
+    )
+    k.add_argument("--expert", required=True, help="expert directory or env id")
+    k.add_argument("--env", default=None, help="check that the expert is for this env")
+    k.add_argument("-n", "--episodes", type=int, default=10, help="episodes to collect")
+    k.add_argument("--seed", type=int, default=0, help="seed of the first episode")
+    k.add_argument("--out", required=True, help="ilfo .npz to write")
+    k.set_defaults(run=_run_demos_collect)
+
+
+def _run_demos_collect(args: argparse.Namespace) -> int:
+    from ilfo.experts import collect_demos, load_expert
+
+    expert = load_expert(args.expert)
+    if args.env and args.env != expert.config.env:
+        raise ValueError(f"the expert is for {expert.config.env}, not {args.env}")
+    episodes = collect_demos(expert, args.episodes, args.out, first_seed=args.seed)
+    returns = np.array([e.task_return for e in episodes])
+    print(
+        f"wrote {args.out}: {len(episodes)} episodes of {len(episodes[0].observations) - 1} "
+        f"steps, return {returns.mean():.1f} +- {returns.std():.1f}"
+    )
+    return 0
 
 
 def _run_demos_info(args: argparse.Namespace) -> int:
