@@ -235,6 +235,7 @@ class Trainer:
         self.random_states: list[np.ndarray] = []
         self.last_eval: dict[str, float] = {}
         self.elapsed = 0.0
+        self._tb: Any = None  # TensorBoard writer, opened with the first metrics row
 
     # ----------------------------------------------------------------------------- the loop
     def train(self) -> Path:
@@ -264,12 +265,17 @@ class Trainer:
         except KeyboardInterrupt:
             self.save_checkpoint()
             bar.close()
+            if self._tb is not None:
+                self._tb.close()
+                self._tb = None
             print(
                 f"\ninterrupted: checkpoint at step {self.step}; continue with "
                 f"`ilfo train --resume {self.run_dir}`"
             )
             raise
         bar.close()
+        if self._tb is not None:
+            self._tb.close()
         self._save_policy()
         plot_runs([self.run_dir], self.run_dir / "learning_curve.png")
         return self.run_dir
@@ -409,6 +415,14 @@ class Trainer:
 
     # ------------------------------------------------------------------ files and resume
     def _write_metrics(self, row: dict[str, Any]) -> None:
+        """Append a row to metrics.csv and its scalars to the TensorBoard events file."""
+        if self._tb is None:
+            from tensorboardX import SummaryWriter
+
+            self._tb = SummaryWriter(str(self.run_dir / "tb"), flush_secs=30)
+        for key, value in row.items():
+            if key not in ("step", "episode") and isinstance(value, int | float):
+                self._tb.add_scalar(key, value, global_step=row["step"])
         path = self.run_dir / "metrics.csv"
         new = not path.exists()
         with path.open("a", newline="") as f:
