@@ -292,13 +292,15 @@ class Trainer:
         obs, _ = self.env.reset(seed=env_seed)
         observations, actions, task_rewards, env_terminated = [obs], [], [], []
         explore_key = jax.random.fold_in(jax.random.PRNGKey(cfg.seed), self.episode)
+        # All of the episode's exploration keys at once, as numpy: one dispatch, not one a step.
+        step_keys = np.asarray(jax.random.split(explore_key, self.horizon))
         terminated = False
         for t in range(self.horizon):
             if random_phase:
                 action = rng.uniform(-self.max_action, self.max_action, self.action_dim)
             else:
                 agent_obs = self._agent_obs(obs, t)
-                key = jax.random.fold_in(explore_key, t)
+                key = step_keys[t]
                 action = np.asarray(funcs.act(self.state, agent_obs, key), dtype=np.float64)
             obs, reward, terminated, truncated, info = self.env.step(action)
             observations.append(obs)

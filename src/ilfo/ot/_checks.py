@@ -18,7 +18,8 @@ def check_problem(
     n, m = cost.shape
     if n == 0 or m == 0:
         raise ValueError(f"cost matrix must be non-empty, got shape {cost.shape}")
-    if not np.isfinite(cost).all():
+    # A finite sum proves every entry finite at a third of the cost of isfinite over the matrix.
+    if not np.isfinite(cost.sum()) and not np.isfinite(cost).all():
         raise ValueError("cost matrix contains NaN or inf")
     a = _weights(a, n, "a")
     b = _weights(b, m, "b")

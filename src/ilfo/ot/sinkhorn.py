@@ -306,9 +306,10 @@ def _fill_kernel(
     out: np.ndarray, cost: np.ndarray, f: np.ndarray, g: np.ndarray, reg: float
 ) -> None:
     """out <- exp((f_i + g_j - C_ij) / reg), in place (allocation costs more than exp here)."""
-    np.subtract(f[:, None], cost, out=out)
-    out += g[None, :]
-    out *= 1.0 / reg
+    np.multiply(cost, -1.0 / reg, out=out)
+    out += (f / reg)[:, None]
+    if g.any():
+        out += (g / reg)[None, :]
     np.exp(out, out=out)
 
 
