@@ -52,6 +52,9 @@ def test_export_load_collect_and_card(tiny_run, tmp_path):
     assert set(card["sha256"]) == {"policy.msgpack", "expert.json", "demos.npz"}
     result = evaluate_expert(out, 2)
     assert result["episodes"] == 2 and np.isfinite(result["return_mean"])
+    latest = export_expert(tiny_run, tmp_path / "latest", which="latest")
+    assert json.loads((latest / "expert.json").read_text())["exported"]["policy"] == "latest"
+    assert json.loads((out / "expert.json").read_text())["exported"]["policy"] == "best"
 
 
 def test_expert_cli_train_resume_export_eval(tmp_path, capsys):

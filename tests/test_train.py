@@ -42,6 +42,7 @@ def test_smoke_run_writes_everything(tmp_path):
     for name in ("config.json", "metrics.csv", "policy.msgpack", "learning_curve.png"):
         assert (run / name).is_file(), name
     assert list((run / "tb").glob("events.out.tfevents.*"))
+    assert (run / "best_policy.msgpack").is_file()
     rows = _metrics(run)
     assert [int(r["step"]) for r in rows] == [100, 200, 300, 400, 500, 600]
     evals = [r for r in rows if r["eval_score"]]

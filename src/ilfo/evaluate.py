@@ -10,7 +10,7 @@ import flax.serialization
 import numpy as np
 
 from ilfo.envs import episode_scores, make_env
-from ilfo.train import TrainConfig, Trainer, rollout_policy
+from ilfo.train import TrainConfig, Trainer, policy_params, rollout_policy
 
 
 def evaluate_run(run_dir: Path, episodes: int = 10, video: str | None = None) -> dict[str, Any]:
@@ -27,12 +27,15 @@ def evaluate_run(run_dir: Path, episodes: int = 10, video: str | None = None) ->
     config = TrainConfig(**json.loads(config_path.read_text()))
     trainer = Trainer(config, run_dir, progress=False)
     policy = run_dir / "policy.msgpack"
-    if not policy.is_file():
+    if policy.is_file():
+        params = flax.serialization.from_bytes(policy_params(trainer.state), policy.read_bytes())
+        state = trainer.state.replace(**params)
+    else:
         latest = run_dir / "checkpoints" / "latest"
         if not latest.is_file():
             raise FileNotFoundError(f"{run_dir} has neither policy.msgpack nor a checkpoint")
-        policy = run_dir / "checkpoints" / latest.read_text().strip() / "agent.msgpack"
-    state = flax.serialization.from_bytes(trainer.state, policy.read_bytes())
+        ckpt = run_dir / "checkpoints" / latest.read_text().strip() / "agent.msgpack"
+        state = flax.serialization.from_bytes(trainer.state, ckpt.read_bytes())
     env = trainer.eval_env
     frames: list[np.ndarray] = []
     if video:

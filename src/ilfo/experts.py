@@ -25,7 +25,15 @@ import numpy as np
 from ilfo import demos as demo_io
 from ilfo.envs import episode_scores, make_env
 from ilfo.paths import DATA_DIR
-from ilfo.train import Agent, TrainConfig, Trainer, make_agent, rollout_policy
+from ilfo.train import (
+    BEST_POLICY_FILE,
+    Agent,
+    TrainConfig,
+    Trainer,
+    make_agent,
+    policy_params,
+    rollout_policy,
+)
 
 POLICY_FILE, EXPERT_FILE, DEMOS_FILE, CARD_FILE = (
     "policy.msgpack",
@@ -55,26 +63,36 @@ class ExpertPolicy:
         return rollout_policy(env, self.agent, self.state, self.horizon, seed=seed)
 
 
-def export_expert(run_dir: str | Path, out_dir: str | Path | None = None) -> Path:
-    """Export a run's latest policy (actor and normaliser only) as an expert."""
+def export_expert(
+    run_dir: str | Path, out_dir: str | Path | None = None, which: str = "best"
+) -> Path:
+    """Export a run's policy (actor and normaliser only) as an expert.
+
+    ``which``: ``best`` (the policy of the run's best evaluation, the usual choice for SAC, whose
+    evaluations swing between checkpoints) or ``latest`` (the last checkpoint's).
+    """
+    if which not in ("best", "latest"):
+        raise ValueError(f"which must be 'best' or 'latest', got {which!r}")
     run_dir = Path(run_dir)
-    trainer = _trainer_with_latest_state(run_dir)
+    trainer = Trainer.from_checkpoint(run_dir, progress=False, with_replay=False)
     config = trainer.config
     out = Path(out_dir) if out_dir else expert_dir(config.env)
     out.mkdir(parents=True, exist_ok=True)
-    policy = {
-        "actor_params": trainer.state.actor_params,
-        "obs_mean": trainer.state.obs_mean,
-        "obs_std": trainer.state.obs_std,
-    }
-    (out / POLICY_FILE).write_bytes(flax.serialization.to_bytes(policy))
+    best = run_dir / BEST_POLICY_FILE
+    if which == "best" and best.is_file():
+        policy_bytes = best.read_bytes()
+        chosen = {"policy": "best", **trainer.best_eval}
+    else:
+        policy_bytes = flax.serialization.to_bytes(policy_params(trainer.state))
+        chosen = {"policy": "latest", "step": trainer.step, **trainer.last_eval}
+    (out / POLICY_FILE).write_bytes(policy_bytes)
     record = {
         "train_config": dataclasses.asdict(config),
         "steps_trained": trainer.step,
         "hours_trained": round(trainer.elapsed / 3600, 3),
         "horizon": trainer.horizon,
         "source_run": run_dir.name,
-        "last_eval": trainer.last_eval,
+        "exported": chosen,
     }
     (out / EXPERT_FILE).write_text(json.dumps(record, indent=2) + "\n")
     return out
@@ -96,13 +114,10 @@ def load_expert(path: str | Path) -> ExpertPolicy:
         config, obs_dim, action_dim, float(env.action_space.high.flat[0]), record["horizon"]
     )
     state = agent.functions.init(config.seed)
-    template = {
-        "actor_params": state.actor_params,
-        "obs_mean": state.obs_mean,
-        "obs_std": state.obs_std,
-    }
     try:
-        policy = flax.serialization.from_bytes(template, (path / POLICY_FILE).read_bytes())
+        policy = flax.serialization.from_bytes(
+            policy_params(state), (path / POLICY_FILE).read_bytes()
+        )
     except (ValueError, KeyError) as err:
         raise ValueError(f"{path / POLICY_FILE} does not match its expert.json: {err}") from err
     state = state.replace(**policy)
@@ -191,7 +206,3 @@ def _replay_actions(expert: ExpertPolicy, observations: np.ndarray) -> np.ndarra
     return np.asarray(
         jax.device_get(expert.agent.functions.act(expert.state, obs.astype(np.float32)))
     )
-
-
-def _trainer_with_latest_state(run_dir: Path) -> Trainer:
-    return Trainer.from_checkpoint(run_dir, progress=False, with_replay=False)

@@ -43,6 +43,7 @@ from ilfo.rewards import OOPS, PWIL, OOPSConfig, Rewarder
 Algo = Literal["oops-td3", "oops-ddpg", "oops-sac", "pwil-td3", "td3", "sac"]
 ALGOS: tuple[str, ...] = ("oops-td3", "oops-ddpg", "oops-sac", "pwil-td3", "td3", "sac")
 CHECKPOINT_SCHEMA = 1
+BEST_POLICY_FILE = "best_policy.msgpack"
 
 
 @dataclass(frozen=True)
@@ -236,6 +237,8 @@ class Trainer:
         self.last_eval: dict[str, float] = {}
         self.elapsed = 0.0
         self._tb: Any = None  # TensorBoard writer, opened with the first metrics row
+        self.best_eval: dict[str, float] = {}
+        """The evaluation with the highest score so far, with its step."""
 
     # ----------------------------------------------------------------------------- the loop
     def train(self) -> Path:
@@ -344,6 +347,9 @@ class Trainer:
         if self.step // cfg.eval_every > (self.step - num_steps) // cfg.eval_every:
             self.last_eval = self.evaluate()
             row.update(self.last_eval)
+            if self.last_eval["eval_score"] > self.best_eval.get("eval_score", -math.inf):
+                self.best_eval = {"step": self.step, **self.last_eval}
+                self._save_policy(BEST_POLICY_FILE)
         return row
 
     def _update(self, num_updates: int) -> tuple[Any, dict[str, float]]:
@@ -449,6 +455,7 @@ class Trainer:
             "episode": self.episode,
             "elapsed": self.elapsed,
             "last_eval": self.last_eval,
+            "best_eval": self.best_eval,
             "rewarder_rng": _rng_state(self.rewarder),
         }
         (tmp / "state.json").write_text(json.dumps(meta))
@@ -503,6 +510,7 @@ class Trainer:
         trainer.step, trainer.episode = int(meta["step"]), int(meta["episode"])
         trainer.elapsed = float(meta["elapsed"])
         trainer.last_eval = meta["last_eval"]
+        trainer.best_eval = meta.get("best_eval", {})
         if meta["rewarder_rng"] is not None and trainer.rewarder is not None:
             trainer.rewarder.rng.bit_generator.state = meta["rewarder_rng"]  # type: ignore[attr-defined]
         random_path = ckpt / "random_states.npz"
@@ -511,8 +519,11 @@ class Trainer:
                 trainer.random_states = [f[k] for k in sorted(f.files, key=_arr_index)]
         return trainer
 
-    def _save_policy(self) -> None:
-        (self.run_dir / "policy.msgpack").write_bytes(flax.serialization.to_bytes(self.state))
+    def _save_policy(self, name: str = "policy.msgpack") -> None:
+        """The policy alone (actor parameters and observation normaliser), atomically."""
+        tmp = self.run_dir / f".{name}.tmp"
+        tmp.write_bytes(flax.serialization.to_bytes(policy_params(self.state)))
+        os.replace(tmp, self.run_dir / name)
 
 
 # ------------------------------------------------------------------------------ helpers
@@ -547,6 +558,15 @@ def rollout_policy(
     return Rollout(
         np.asarray(observations), np.asarray(rewards), np.asarray(terminated_flags), frames
     )
+
+
+def policy_params(state: Any) -> dict[str, Any]:
+    """What acting needs of an agent state: actor parameters and the observation normaliser."""
+    return {
+        "actor_params": state.actor_params,
+        "obs_mean": state.obs_mean,
+        "obs_std": state.obs_std,
+    }
 
 
 def _read_config(run_dir: Path) -> dict[str, Any]:
