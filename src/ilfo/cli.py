@@ -137,6 +137,12 @@ def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
     x.add_argument("run_dir", help="the expert's run directory")
     x.add_argument("--out", default=None, help="expert directory (default data/experts/<env>)")
     x.add_argument("-n", "--num-demos", type=int, default=10, help="demos to collect")
+    x.add_argument(
+        "--which",
+        choices=["best", "latest"],
+        default="best",
+        help="the best-evaluated policy or the last checkpoint's",
+    )
     x.set_defaults(run=_run_expert_export)
     e = esub.add_parser("eval", help="Mean and std return of a shipped (or given) expert.")
     e.add_argument("env", help="environment id with a shipped expert, or an expert directory")
@@ -172,7 +178,7 @@ def _run_expert_train(args: argparse.Namespace) -> int:
 def _run_expert_export(args: argparse.Namespace) -> int:
     from ilfo.experts import DEMOS_FILE, collect_demos, export_expert, load_expert, write_card
 
-    out = export_expert(args.run_dir, args.out)
+    out = export_expert(args.run_dir, args.out, which=args.which)
     collect_demos(load_expert(out), args.num_demos, out / DEMOS_FILE)
     card = write_card(out)
     print(

@@ -27,6 +27,7 @@ from ilfo.envs import episode_scores, make_env
 from ilfo.paths import DATA_DIR
 from ilfo.train import (
     BEST_POLICY_FILE,
+    BEST_POLICY_INFO,
     Agent,
     TrainConfig,
     Trainer,
@@ -78,18 +79,23 @@ def export_expert(
     config = trainer.config
     out = Path(out_dir) if out_dir else expert_dir(config.env)
     out.mkdir(parents=True, exist_ok=True)
-    best = run_dir / BEST_POLICY_FILE
-    if which == "best" and best.is_file():
+    best, best_info = run_dir / BEST_POLICY_FILE, run_dir / BEST_POLICY_INFO
+    if which == "best" and best.is_file() and best_info.is_file():
         policy_bytes = best.read_bytes()
-        chosen = {"policy": "best", **trainer.best_eval}
+        chosen = {"policy": "best", **json.loads(best_info.read_text())}
     else:
         policy_bytes = flax.serialization.to_bytes(policy_params(trainer.state))
-        chosen = {"policy": "latest", "step": trainer.step, **trainer.last_eval}
+        chosen = {
+            "policy": "latest",
+            "step": trainer.step,
+            "elapsed": trainer.elapsed,
+            **trainer.last_eval,
+        }
     (out / POLICY_FILE).write_bytes(policy_bytes)
     record = {
         "train_config": dataclasses.asdict(config),
-        "steps_trained": trainer.step,
-        "hours_trained": round(trainer.elapsed / 3600, 3),
+        "steps_trained": chosen["step"],
+        "hours_trained": round(chosen["elapsed"] / 3600, 3),
         "horizon": trainer.horizon,
         "source_run": run_dir.name,
         "exported": chosen,

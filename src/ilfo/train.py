@@ -44,6 +44,7 @@ Algo = Literal["oops-td3", "oops-ddpg", "oops-sac", "pwil-td3", "td3", "sac"]
 ALGOS: tuple[str, ...] = ("oops-td3", "oops-ddpg", "oops-sac", "pwil-td3", "td3", "sac")
 CHECKPOINT_SCHEMA = 1
 BEST_POLICY_FILE = "best_policy.msgpack"
+BEST_POLICY_INFO = "best_policy.json"  # the step and evaluation of best_policy.msgpack
 
 
 @dataclass(frozen=True)
@@ -350,6 +351,9 @@ class Trainer:
             if self.last_eval["eval_score"] > self.best_eval.get("eval_score", -math.inf):
                 self.best_eval = {"step": self.step, **self.last_eval}
                 self._save_policy(BEST_POLICY_FILE)
+                tmp = self.run_dir / f".{BEST_POLICY_INFO}.tmp"
+                tmp.write_text(json.dumps({**self.best_eval, "elapsed": self.elapsed}) + "\n")
+                os.replace(tmp, self.run_dir / BEST_POLICY_INFO)
         return row
 
     def _update(self, num_updates: int) -> tuple[Any, dict[str, float]]:

@@ -1,0 +1,42 @@
+"""The experts shipped in data/experts/: files intact, and each still scores within its card's band."""
+
+import hashlib
+import json
+
+import numpy as np
+import pytest
+
+from ilfo import demos
+from ilfo.experts import evaluate_expert
+from ilfo.paths import DATA_DIR
+
+SHIPPED = sorted(p for p in (DATA_DIR / "experts").glob("*") if (p / "card.json").is_file())
+
+
+def _card(directory):
+    return json.loads((directory / "card.json").read_text())
+
+
+def test_hopper_expert_is_shipped():
+    assert "Hopper-v5" in [p.name for p in SHIPPED]  # `ilfo train`'s default needs it
+
+
+@pytest.mark.parametrize("directory", SHIPPED, ids=lambda p: p.name)
+def test_checksums_and_demos_match_the_card(directory):
+    card = _card(directory)
+    assert card["env_id"] == directory.name
+    for name, digest in card["sha256"].items():
+        assert hashlib.sha256((directory / name).read_bytes()).hexdigest() == digest, name
+    data = demos.load(directory / "demos.npz")
+    assert data.env_id == card["env_id"] and len(data.episodes) == card["num_demos"]
+    returns = [e.task_return for e in data.episodes]
+    assert np.mean(returns) == pytest.approx(card["return_mean"])
+    assert all(len(e.observations) == card["demo_length"] + 1 for e in data.episodes)
+
+
+@pytest.mark.parametrize("directory", SHIPPED, ids=lambda p: p.name)
+def test_expert_still_scores_within_its_band(directory):
+    card = _card(directory)
+    result = evaluate_expert(directory, episodes=2)  # seeds unlike the demos'
+    band = max(3 * card["return_std"], 0.1 * abs(card["return_mean"]))
+    assert abs(result["return_mean"] - card["return_mean"]) <= band, result
