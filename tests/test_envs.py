@@ -44,3 +44,15 @@ def test_episode_scores():
 def test_unknown_env_is_a_clear_error():
     with pytest.raises(ValueError, match="unknown environment"):
         make_env("NoSuchEnv-v0")
+
+
+def test_bipedal_walker_in_fixed_horizon_mode():
+    env = make_env("BipedalWalker-v3", True, horizon=120)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    for step in range(1, 1000):
+        _, _, terminated, truncated, _ = env.step(rng.uniform(-1, 1, 4))
+        assert not terminated
+        if truncated:
+            break
+    assert step == 120
