@@ -33,7 +33,6 @@ import argparse
 import itertools
 import json
 import os
-import platform
 import statistics
 import sys
 import time
@@ -47,27 +46,12 @@ import numpy as np
 
 # Keep this folder off the path: bench/ot.py would shadow POT's `ot` for anything importing it.
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
-from ilfo.agents.td3 import TD3Config, make_td3  # noqa: E402
-from ilfo.replay import ReplayData  # noqa: E402
+from ilfo.agents.td3 import TD3Config, make_td3
+from ilfo.benchmarking import machine
+from ilfo.replay import ReplayData
 
 DIMS = {"hopper": (11 + 1, 3), "humanoid": (376 + 1, 17)}
 PRESETS = {"paper": TD3Config.paper, "fast": TD3Config.fast}
-
-
-def machine() -> str:
-    model = "unknown CPU"
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    model = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return (
-        f"{model}, {os.cpu_count()} cores, {platform.python_version()}, numpy {np.__version__}, "
-        f"jax {jax.__version__}, torch {_torch_version()}"
-    )
 
 
 def _torch_version() -> str:
@@ -422,7 +406,10 @@ def main() -> None:
         args.updates, args.torch_updates, args.repeat = 50, 20, 1
         args.buffer = min(args.buffer, 10_000)
     rows, rates, notes = run(args)
-    meta = {"date": date.today().isoformat(), "machine": machine()}
+    meta = {
+        "date": date.today().isoformat(),
+        "machine": machine(jax=jax.__version__, torch=_torch_version()),
+    }
     if args.json:
         for r in rows:
             print(json.dumps({**r, **meta}))

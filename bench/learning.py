@@ -16,24 +16,16 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
+import sys
 from datetime import date
 from pathlib import Path
 
 import numpy as np
 
+# Keep this folder off the path: bench/ot.py would shadow POT's `ot`.
+sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
+from ilfo.benchmarking import machine
 from ilfo.train import TrainConfig, Trainer, plot_runs, read_metrics
-
-
-def machine() -> str:
-    model = "unknown CPU"
-    try:
-        with open("/proc/cpuinfo") as f:
-            model = next(line.split(":", 1)[1].strip() for line in f if "model name" in line)
-    except (OSError, StopIteration):
-        pass
-    return f"{model}, {os.cpu_count()} cores, Python {platform.python_version()}"
 
 
 def run_seed(config: TrainConfig, run_dir: Path) -> Path:

@@ -22,8 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import sys
 import time
 from collections.abc import Callable
@@ -36,24 +34,12 @@ import numpy as np
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 import ot as pot
 from ilfo import demos
+from ilfo.benchmarking import machine
 from ilfo.ot import OTResult, cost_matrix, emd, marginal_error, sinkhorn
 from ilfo.paths import bundled_demos
 from ilfo.rewards import Standardizer, make_atoms
 
 REG = 0.05
-
-
-def machine() -> str:
-    model = "unknown CPU"
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    model = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return f"{model}, {os.cpu_count()} cores, {platform.python_version()}, numpy {np.__version__}"
 
 
 def best_time(fn: Callable[[], object], repeat: int) -> tuple[float, object]:

@@ -39,7 +39,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import sys
 import tempfile
 import time
@@ -54,26 +53,11 @@ import numpy as np
 
 # Keep this folder off the path: bench/ot.py would shadow POT's `ot`.
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
-from ilfo.paths import bundled_demos  # noqa: E402
-from ilfo.train import TrainConfig, Trainer  # noqa: E402
+from ilfo.benchmarking import machine
+from ilfo.paths import bundled_demos
+from ilfo.train import TrainConfig, Trainer
 
 PIECES = ("env", "act", "reward", "replay", "update", "other")
-
-
-def machine() -> str:
-    model = "unknown CPU"
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    model = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return (
-        f"{model}, {os.cpu_count()} cores, {platform.python_version()}, numpy {np.__version__}, "
-        f"jax {jax.__version__}"
-    )
 
 
 class Timers:
@@ -291,7 +275,7 @@ def main() -> None:
     if args.quick:
         args.steps, args.start_steps, args.repeat, args.update_only = 2000, 1000, 1, 200
     summary, pieces = run(args)
-    meta = {"date": date.today().isoformat(), "machine": machine()}
+    meta = {"date": date.today().isoformat(), "machine": machine(jax=jax.__version__)}
     if args.json:
         for row in (summary, *pieces):
             print(json.dumps({**row, **meta}))

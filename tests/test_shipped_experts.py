@@ -1,4 +1,4 @@
-"""The experts shipped in data/experts/: files intact, and each still scores within its card's band."""
+"""Shipped experts (data/experts/): files intact, each still scoring within its card's band."""
 
 import hashlib
 import json

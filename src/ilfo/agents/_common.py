@@ -5,10 +5,13 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
 from numpy.typing import ArrayLike
+
+from ilfo.replay import ReplayData, sample_batch
 
 
 def as_float_bound(max_action: float | ArrayLike) -> float:
@@ -51,3 +54,23 @@ def make_normalizer_setter(
         )
 
     return set_normalizer
+
+
+def scan_updates(
+    update_step: Callable[[Any, ReplayData, jax.Array], tuple[Any, Any]],
+    state: Any,
+    data: ReplayData,
+    size: jax.Array | int,
+    num_updates: int,
+    batch_size: int,
+) -> tuple[Any, Any]:
+    """``num_updates`` applications of ``update_step`` in one ``lax.scan``, each on a uniform
+    batch from slots [0, size) of ``data``; keys come from ``state.key``. Returns the final
+    state and the per-update outputs stacked on a leading axis."""
+
+    def body(state: Any, _: None) -> tuple[Any, Any]:
+        key, k_batch, k_step = jax.random.split(state.key, 3)
+        state = state.replace(key=key)
+        return update_step(state, sample_batch(data, size, k_batch, batch_size), k_step)
+
+    return jax.lax.scan(body, state, None, length=num_updates)

@@ -23,14 +23,19 @@ import jax.numpy as jnp
 import optax
 from numpy.typing import ArrayLike
 
-from ilfo.agents._common import as_float_bound, make_normalizer_setter, make_optimizer
+from ilfo.agents._common import (
+    as_float_bound,
+    make_normalizer_setter,
+    make_optimizer,
+    scan_updates,
+)
 from ilfo.agents.networks import (
     CriticEnsemble,
     SquashedGaussianActor,
     deterministic_squashed,
     sample_squashed,
 )
-from ilfo.replay import ReplayData, sample_batch
+from ilfo.replay import ReplayData
 
 __all__ = ["SAC", "SACConfig", "SACState", "make_sac"]
 
@@ -254,14 +259,8 @@ def make_sac(
         scalar metrics: mean critic loss, actor loss, Q, policy entropy, and the final
         temperature."""
 
-        def body(state: SACState, _: None):
-            key, k_batch, k_step = jax.random.split(state.key, 3)
-            state = state.replace(key=key)
-            batch = sample_batch(data, size, k_batch, cfg.batch_size)
-            return update_step(state, batch, k_step)
-
-        state, (c_loss, a_loss, q_mean, entropy) = jax.lax.scan(
-            body, state, None, length=num_updates
+        state, (c_loss, a_loss, q_mean, entropy) = scan_updates(
+            update_step, state, data, size, num_updates, cfg.batch_size
         )
         metrics = {
             "critic_loss": jnp.mean(c_loss),

@@ -28,9 +28,14 @@ import jax.numpy as jnp
 import optax
 from numpy.typing import ArrayLike
 
-from ilfo.agents._common import as_float_bound, make_normalizer_setter, make_optimizer
+from ilfo.agents._common import (
+    as_float_bound,
+    make_normalizer_setter,
+    make_optimizer,
+    scan_updates,
+)
 from ilfo.agents.networks import CriticEnsemble, DeterministicActor
-from ilfo.replay import ReplayData, sample_batch
+from ilfo.replay import ReplayData
 
 __all__ = [
     "TD3",
@@ -379,14 +384,8 @@ def make_td3(
         mean critic loss, mean actor loss (over the updates that trained the actor) and mean Q of
         the batches (all scalars)."""
 
-        def body(state: TD3State, _: None):
-            key, k_batch, k_step = jax.random.split(state.key, 3)
-            state = state.replace(key=key)
-            batch = sample_batch(data, size, k_batch, cfg.batch_size)
-            return update_step(state, batch, k_step)
-
-        state, (c_loss, a_loss, q_mean, did_actor) = jax.lax.scan(
-            body, state, None, length=num_updates
+        state, (c_loss, a_loss, q_mean, did_actor) = scan_updates(
+            update_step, state, data, size, num_updates, cfg.batch_size
         )
         n_actor = jnp.sum(did_actor)
         metrics = {
