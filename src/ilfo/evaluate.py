@@ -40,6 +40,7 @@ def evaluate_run(run_dir: Path, episodes: int = 10, video: str | None = None) ->
     frames: list[np.ndarray] = []
     if video:
         env = make_env(config.env, True, horizon=trainer.horizon, render_mode="rgb_array")
+        _check_rendering(env)
     scores, returns, distances = [], [], []
     for k in range(episodes):
         rollout = rollout_policy(
@@ -69,6 +70,19 @@ def evaluate_run(run_dir: Path, episodes: int = 10, video: str | None = None) ->
         _write_video(video, frames, fps=int(env.metadata.get("render_fps", 50)))
         result["video"] = video
     return result
+
+
+def _check_rendering(env: Any) -> None:
+    """Fail early, and say why, where this machine cannot render offscreen."""
+    try:
+        env.reset(seed=0)
+        env.render()
+    except Exception as err:  # MuJoCo raises FatalError and others without OpenGL
+        raise ValueError(
+            f"--video: offscreen rendering is unavailable here ({type(err).__name__}: {err}). "
+            "MuJoCo needs OpenGL: set MUJOCO_GL=egl (with a GPU driver) or MUJOCO_GL=osmesa "
+            "(with Debian's libosmesa6), or evaluate without --video."
+        ) from None
 
 
 def _write_video(path: str, frames: list[np.ndarray], fps: int) -> None:
