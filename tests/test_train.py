@@ -113,3 +113,28 @@ def test_cli_errors(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["train", "--steps", "many"])
     assert main(["eval", str(tmp_path)]) == 2
+
+
+def test_ctrl_c_mid_episode_finishes_the_episode_checkpoints_and_resumes_exactly(tmp_path):
+    import os
+    import signal
+
+    full = _metrics(_train(tmp_path, "full"))
+    config = TrainConfig(**{**TINY, "steps": 600})
+    trainer = Trainer(config, tmp_path / "interrupted", progress=False)
+    rewarder, calls = trainer.rewarder, []
+
+    def interrupting_rewarder(observations):
+        calls.append(1)
+        if len(calls) == 4:  # inside episode 4, as a user's Ctrl-C would land
+            os.kill(os.getpid(), signal.SIGINT)
+        return rewarder(observations)
+
+    trainer.rewarder = interrupting_rewarder
+    with pytest.raises(KeyboardInterrupt):
+        trainer.train()
+    run = tmp_path / "interrupted"
+    assert (run / "checkpoints" / "latest").read_text().strip() == "step_000000400"
+    resumed = Trainer.resume(run, progress=False)
+    assert resumed.step == 400
+    assert _metrics(resumed.train()) == full

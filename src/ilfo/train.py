@@ -252,8 +252,9 @@ class Trainer:
         bar = _progress_bar(cfg.steps, self.step, self.progress)
         start_wall = time.perf_counter() - self.elapsed
         next_checkpoint = (self.step // cfg.checkpoint_every + 1) * cfg.checkpoint_every
+        last_checkpoint = self.step
         try:
-            with _interrupt_as_exception():
+            with _stop_requests() as stop:
                 while self.step < cfg.steps:
                     t0 = time.perf_counter()
                     row = self._episode()
@@ -263,17 +264,23 @@ class Trainer:
                     self._write_metrics(row)
                     bar.update(self.step - bar.n)
                     bar.set_postfix(_postfix(row, self.last_eval), refresh=False)
-                    if self.step >= next_checkpoint or self.step >= cfg.steps:
+                    if self.step >= next_checkpoint or self.step >= cfg.steps or stop.requested:
                         self.save_checkpoint()
-                        next_checkpoint += cfg.checkpoint_every
+                        last_checkpoint = self.step
+                        next_checkpoint = (self.step // cfg.checkpoint_every + 1) * (
+                            cfg.checkpoint_every
+                        )
+                    if stop.requested and self.step < cfg.steps:
+                        raise KeyboardInterrupt
         except KeyboardInterrupt:
-            self.save_checkpoint()
+            # A stop request is honoured at an episode boundary, just checkpointed; a second
+            # Ctrl-C quits at once, and the last checkpoint (consistent by construction) stays.
             bar.close()
             if self._tb is not None:
                 self._tb.close()
                 self._tb = None
             print(
-                f"\ninterrupted: checkpoint at step {self.step}; continue with "
+                f"\ninterrupted: checkpoint at step {last_checkpoint}; continue with "
                 f"`ilfo train --resume {self.run_dir}`"
             )
             raise
@@ -601,23 +608,36 @@ def _truncate_metrics(path: Path, step: int) -> None:
         writer.writerows(r for r in rows if int(r["step"]) <= step)
 
 
+class _StopRequest:
+    """Set by the first Ctrl-C or SIGTERM; the loop stops at the next episode boundary."""
+
+    requested = False
+
+
 @contextmanager
-def _interrupt_as_exception() -> Iterator[None]:
-    """SIGTERM behaves like Ctrl-C, so a killed job also checkpoints."""
-    previous = signal.getsignal(signal.SIGTERM)
+def _stop_requests() -> Iterator[_StopRequest]:
+    """The first SIGINT/SIGTERM asks the loop to checkpoint and stop after the current episode
+    (a run is consistent only between episodes); the second raises KeyboardInterrupt at once."""
+    stop = _StopRequest()
 
     def handler(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt
+        if stop.requested:
+            raise KeyboardInterrupt
+        stop.requested = True
+        print("\nstopping after this episode (Ctrl-C again to quit at once)", flush=True)
 
+    previous = {}
     try:
-        signal.signal(signal.SIGTERM, handler)
-    except ValueError:  # not the main thread
-        previous = None
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.getsignal(sig)
+            signal.signal(sig, handler)
+    except ValueError:  # not the main thread: signals keep their default behaviour
+        previous = {}
     try:
-        yield
+        yield stop
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for sig, old in previous.items():
+            signal.signal(sig, old)
 
 
 def _progress_bar(total: int, initial: int, enabled: bool):
