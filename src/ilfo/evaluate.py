@@ -9,8 +9,8 @@ from typing import Any
 import flax.serialization
 import numpy as np
 
-from ilfo.envs import episode_scores, make_env
-from ilfo.train import TrainConfig, Trainer, policy_params, rollout_policy
+from ilfo.envs import make_env
+from ilfo.train import TrainConfig, Trainer, policy_params, score_policy
 
 
 def evaluate_run(run_dir: Path, episodes: int = 10, video: str | None = None) -> dict[str, Any]:
@@ -37,37 +37,34 @@ def evaluate_run(run_dir: Path, episodes: int = 10, video: str | None = None) ->
         ckpt = run_dir / "checkpoints" / latest.read_text().strip() / "agent.msgpack"
         state = flax.serialization.from_bytes(trainer.state, ckpt.read_bytes())
     env = trainer.eval_env
-    frames: list[np.ndarray] = []
     if video:
         env = make_env(config.env, True, horizon=trainer.horizon, render_mode="rgb_array")
         _check_rendering(env)
-    scores, returns, distances = [], [], []
-    for k in range(episodes):
-        rollout = rollout_policy(
-            env, trainer.agent, state, trainer.horizon, seed=k, render=bool(video) and k == 0
-        )
-        frames.extend(rollout.frames)
-        fixed, standard = episode_scores(rollout.rewards, rollout.env_terminated)
-        scores.append(fixed)
-        returns.append(standard)
-        if trainer.distance_probe is not None:
-            distances.append(trainer.distance_probe(rollout.observations).distance)
+    scored = score_policy(
+        env,
+        trainer.agent,
+        state,
+        trainer.horizon,
+        list(range(episodes)),
+        trainer.distance_probe,
+        render_first=bool(video),
+    )
     result: dict[str, Any] = {
         "env": config.env,
         "algo": config.algo,
         "episodes": episodes,
-        "score_mean": float(np.mean(scores)),
-        "score_std": float(np.std(scores)),
-        "return_mean": float(np.mean(returns)),
-        "return_std": float(np.std(returns)),
+        "score_mean": float(np.mean(scored.scores)),
+        "score_std": float(np.std(scored.scores)),
+        "return_mean": float(np.mean(scored.returns)),
+        "return_std": float(np.std(scored.returns)),
     }
     if not np.isnan(trainer.demo_return):
         result["score_norm"] = result["score_mean"] / trainer.demo_return
         result["return_norm"] = result["return_mean"] / trainer.demo_return
-    if distances:
-        result["ot_distance"] = float(np.mean(distances))
+    if len(scored.distances):
+        result["ot_distance"] = float(np.mean(scored.distances))
     if video:
-        _write_video(video, frames, fps=int(env.metadata.get("render_fps", 50)))
+        _write_video(video, scored.frames, fps=int(env.metadata.get("render_fps", 50)))
         result["video"] = video
     return result
 

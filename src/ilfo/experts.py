@@ -23,7 +23,7 @@ import jax
 import numpy as np
 
 from ilfo import demos as demo_io
-from ilfo.envs import episode_scores, make_env
+from ilfo.envs import make_env
 from ilfo.paths import DATA_DIR
 from ilfo.train import (
     BEST_POLICY_FILE,
@@ -34,6 +34,7 @@ from ilfo.train import (
     make_agent,
     policy_params,
     rollout_policy,
+    score_policy,
 )
 
 POLICY_FILE, EXPERT_FILE, DEMOS_FILE, CARD_FILE = (
@@ -187,19 +188,16 @@ def write_card(directory: str | Path) -> dict[str, Any]:
 def evaluate_expert(path: str | Path, episodes: int, first_seed: int = 1000) -> dict[str, Any]:
     """Mean and std of an expert's fixed-horizon score and standard return."""
     expert = load_expert(path)
-    scores, returns = [], []
-    for k in range(episodes):
-        rollout = expert.rollout(seed=first_seed + k)
-        fixed, standard = episode_scores(rollout.rewards, rollout.env_terminated)
-        scores.append(fixed)
-        returns.append(standard)
+    env = make_env(expert.config.env, True, horizon=expert.horizon)
+    seeds = [first_seed + k for k in range(episodes)]
+    scored = score_policy(env, expert.agent, expert.state, expert.horizon, seeds)
     return {
         "env_id": expert.config.env,
         "episodes": episodes,
-        "score_mean": float(np.mean(scores)),
-        "score_std": float(np.std(scores)),
-        "return_mean": float(np.mean(returns)),
-        "return_std": float(np.std(returns)),
+        "score_mean": float(np.mean(scored.scores)),
+        "score_std": float(np.std(scored.scores)),
+        "return_mean": float(np.mean(scored.returns)),
+        "return_std": float(np.std(scored.returns)),
     }
 
 

@@ -407,29 +407,19 @@ class Trainer:
     # ------------------------------------------------------------------------ evaluation
     def evaluate(self) -> dict[str, float]:
         """Deterministic fixed-horizon episodes: both scores, normalised, and OT distance."""
-        scores, returns, distances = [], [], []
-        for k in range(self.config.eval_episodes):
-            rollout = rollout_policy(
-                self.eval_env,
-                self.agent,
-                self.state,
-                self.horizon,
-                seed=10_000_019 * (self.config.seed + 1) + k,
-            )
-            fixed, standard = episode_scores(rollout.rewards, rollout.env_terminated)
-            scores.append(fixed)
-            returns.append(standard)
-            if self.distance_probe is not None:
-                distances.append(self.distance_probe(rollout.observations).distance)
+        seeds = [10_000_019 * (self.config.seed + 1) + k for k in range(self.config.eval_episodes)]
+        scored = score_policy(
+            self.eval_env, self.agent, self.state, self.horizon, seeds, self.distance_probe
+        )
         out = {
-            "eval_score": round(float(np.mean(scores)), 3),
-            "eval_return": round(float(np.mean(returns)), 3),
+            "eval_score": round(float(np.mean(scored.scores)), 3),
+            "eval_return": round(float(np.mean(scored.returns)), 3),
         }
         if not math.isnan(self.demo_return):
             out["eval_score_norm"] = round(out["eval_score"] / self.demo_return, 4)
             out["eval_return_norm"] = round(out["eval_return"] / self.demo_return, 4)
-        if distances:
-            out["eval_ot_distance"] = round(float(np.mean(distances)), 5)
+        if len(scored.distances):
+            out["eval_ot_distance"] = round(float(np.mean(scored.distances)), 5)
         return out
 
     # ------------------------------------------------------------------ files and resume
@@ -578,6 +568,43 @@ def policy_params(state: Any) -> dict[str, Any]:
         "obs_mean": state.obs_mean,
         "obs_std": state.obs_std,
     }
+
+
+class PolicyScores(NamedTuple):
+    """Scores of deterministic fixed-horizon episodes, one entry per episode."""
+
+    scores: np.ndarray
+    """The paper's fixed-horizon score (rewards of steps with a reported fall zeroed)."""
+    returns: np.ndarray
+    """The standard return (up to and including the first fall)."""
+    distances: np.ndarray
+    """OT distance of each episode to the probe's demo; empty without a probe."""
+    frames: list[np.ndarray]
+    """Rendered frames of the first episode, if asked for."""
+
+
+def score_policy(
+    env: Any,
+    agent: Agent,
+    state: Any,
+    horizon: int,
+    seeds: list[int],
+    distance_probe: Any = None,
+    render_first: bool = False,
+) -> PolicyScores:
+    """Roll out the deterministic policy once per seed and score each episode."""
+    scores, returns, distances, frames = [], [], [], []
+    for k, seed in enumerate(seeds):
+        rollout = rollout_policy(
+            env, agent, state, horizon, seed=seed, render=render_first and k == 0
+        )
+        frames.extend(rollout.frames)
+        fixed, standard = episode_scores(rollout.rewards, rollout.env_terminated)
+        scores.append(fixed)
+        returns.append(standard)
+        if distance_probe is not None:
+            distances.append(distance_probe(rollout.observations).distance)
+    return PolicyScores(np.array(scores), np.array(returns), np.array(distances), frames)
 
 
 def _read_config(run_dir: Path) -> dict[str, Any]:
