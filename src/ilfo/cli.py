@@ -230,6 +230,7 @@ def _run_expert_train(args: argparse.Namespace) -> int:
             checkpoint_every=args.checkpoint_every,
         )
         trainer = Trainer(config, run_dir, progress=not args.no_progress)
+    trainer.resume_command = f"ilfo expert train {args.env} --resume --run-dir {run_dir}"
     print(f"run directory: {run_dir}")
     trainer.train()
     print(f"done: {json.dumps(trainer.last_eval)}")

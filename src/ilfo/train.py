@@ -349,6 +349,8 @@ class Trainer:
         self.config = config
         self.run_dir = Path(run_dir)
         self.progress = progress
+        self.resume_command = f"ilfo train --resume {self.run_dir}"
+        """What the interrupt message tells the user to run to continue (the CLI may change it)."""
         self.env = make_env(config.env, config.uses_fixed_horizon, horizon=config.horizon)
         self.horizon = int(self.env.spec.max_episode_steps)
         self.eval_env = make_env(config.env, True, horizon=self.horizon)
@@ -431,7 +433,7 @@ class Trainer:
                 self._tb = None
             print(
                 f"\ninterrupted: checkpoint at step {last_checkpoint}; continue with "
-                f"`ilfo train --resume {self.run_dir}`"
+                f"`{self.resume_command}`"
             )
             raise
         bar.close()

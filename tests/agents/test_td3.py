@@ -12,7 +12,7 @@ import pytest
 from agent_helpers import ACT_DIM, MAX_ACTION, OBS_DIM, TINY, random_buffer
 
 from ilfo.agents import TD3Config, critic_loss, ddpg_config, make_td3, pal_loss, policy_of
-from ilfo.agents.td3 import resample_time_feature
+from ilfo.agents.td3 import augment_time
 
 
 def tree_allclose(a, b, **kw) -> bool:
@@ -186,36 +186,70 @@ def test_ddpg_runs(buffer):
 # --- time augmentation ----------------------------------------------------------------------
 
 
-def test_resample_time_feature_changes_only_last_feature():
+def test_augment_time_draws_one_time_to_go_per_row():
     obs = jax.random.normal(jax.random.PRNGKey(0), (5000, 4))
-    out = resample_time_feature(jax.random.PRNGKey(1), obs, max_time=1000)
-    np.testing.assert_array_equal(np.asarray(out[:, :-1]), np.asarray(obs[:, :-1]))
-    k = np.asarray(out[:, -1]) * 1000
+    next_obs = jax.random.normal(jax.random.PRNGKey(2), (5000, 4))
+    o, n, not_done = augment_time(jax.random.PRNGKey(1), obs, next_obs, max_time=1000)
+    np.testing.assert_array_equal(np.asarray(o[:, :-1]), np.asarray(obs[:, :-1]))
+    np.testing.assert_array_equal(np.asarray(n[:, :-1]), np.asarray(next_obs[:, :-1]))
+    k = np.asarray(o[:, -1]) * 1000
     np.testing.assert_allclose(k, np.round(k), atol=1e-3)
     assert k.min() >= 1 - 1e-3 and k.max() <= 1000 + 1e-3
     assert len(np.unique(np.round(k))) > 900  # uniform over {1..1000}: draws vary per row
+    # The next state is one step closer to the horizon; the episode ends exactly at k = 1.
+    np.testing.assert_allclose(np.asarray(n[:, -1]) * 1000, k - 1, atol=1e-3)
+    np.testing.assert_array_equal(np.asarray(not_done), (np.round(k) > 1).astype(np.float32))
 
 
-def test_time_augmentation_ignores_recorded_next_time():
+def test_time_augmentation_critic_ignores_recorded_times_and_ends():
     buf = random_buffer(seed=2)
     cfg = TD3Config(**TINY, time_augmentation=True)
     agent = make_td3(cfg, OBS_DIM, ACT_DIM, MAX_ACTION)
     s0 = agent.init(0)
-    base, _ = agent.update(s0, buf.data, buf.size, num_updates=4)
-    # The recorded time of s' is resampled in the TD target, so changing it changes nothing.
-    other_next = buf.data._replace(next_obs=buf.data.next_obs.at[:, -1].set(0.777))
-    same, _ = agent.update(s0, other_next, buf.size, num_updates=4)
-    assert tree_equal(base, same)
-    # The time of s is used as recorded (critic input and actor loss).
-    other_obs = buf.data._replace(obs=buf.data.obs.at[:, -1].set(0.777))
-    diff, _ = agent.update(s0, other_obs, buf.size, num_updates=4)
-    assert not tree_allclose(base.actor_params, diff.actor_params)
+    # One update trains the critic only (policy delay 2): its inputs' times are all drawn, and
+    # its bootstrapping is cut by the draw, so the recorded times and ends change nothing.
+    base, _ = agent.update(s0, buf.data, buf.size, num_updates=1)
+    other = buf.data._replace(
+        obs=buf.data.obs.at[:, -1].set(0.777),
+        next_obs=buf.data.next_obs.at[:, -1].set(0.123),
+        not_done=1.0 - buf.data.not_done,
+    )
+    same, _ = agent.update(s0, other, buf.size, num_updates=1)
+    assert tree_equal(base.critic_params, same.critic_params)
+    # The actor loss uses the recorded time of s.
+    a, _ = agent.update(s0, buf.data, buf.size, num_updates=2)
+    b, _ = agent.update(s0, other, buf.size, num_updates=2)
+    assert not tree_allclose(a.actor_params, b.actor_params)
     # Without augmentation the recorded time of s' matters.
     plain = make_td3(TD3Config(**TINY), OBS_DIM, ACT_DIM, MAX_ACTION)
     p0 = plain.init(0)
-    a, _ = plain.update(p0, buf.data, buf.size, num_updates=4)
-    b, _ = plain.update(p0, other_next, buf.size, num_updates=4)
+    a, _ = plain.update(p0, buf.data, buf.size, num_updates=1)
+    b, _ = plain.update(p0, buf.data._replace(next_obs=other.next_obs), buf.size, num_updates=1)
     assert not tree_allclose(a.critic_params, b.critic_params)
+
+
+def test_time_augmentation_is_the_recorded_backup_at_the_drawn_time():
+    # With a horizon of 1 the draw is always k = 1: current time 1, next time 0, no bootstrap.
+    # That must be exactly the plain update on data recorded that way.
+    buf = random_buffer(seed=3)
+    aug = make_td3(
+        TD3Config(**TINY, time_augmentation=True, max_time=1), OBS_DIM, ACT_DIM, MAX_ACTION
+    )
+    plain = make_td3(TD3Config(**TINY), OBS_DIM, ACT_DIM, MAX_ACTION)
+    recorded = buf.data._replace(
+        obs=buf.data.obs.at[:, -1].set(1.0),
+        next_obs=buf.data.next_obs.at[:, -1].set(0.0),
+        not_done=jnp.zeros_like(buf.data.not_done),
+    )
+    a, _ = aug.update(aug.init(0), recorded, buf.size, num_updates=3)
+    b, _ = plain.update(plain.init(0), recorded, buf.size, num_updates=3)
+    assert tree_allclose(a.critic_params, b.critic_params, atol=1e-6)
+    assert tree_allclose(a.actor_params, b.actor_params, atol=1e-6)
+    # ... and differs from the plain update that bootstraps (not_done = 1).
+    c, _ = plain.update(
+        plain.init(0), recorded._replace(not_done=jnp.ones_like(recorded.not_done)), buf.size, 3
+    )
+    assert not tree_allclose(a.critic_params, c.critic_params, atol=1e-6)
 
 
 # --- acting and the normaliser --------------------------------------------------------------

@@ -18,11 +18,11 @@ from ilfo.agents.td3 import (
     TD3,
     TD3Config,
     TD3State,
+    augment_time,
     critic_loss,
     ddpg_config,
     make_td3,
     pal_loss,
-    resample_time_feature,
 )
 
 __all__ = [
@@ -38,11 +38,11 @@ __all__ = [
     "SquashedGaussianActor",
     "TD3Config",
     "TD3State",
+    "augment_time",
     "critic_loss",
     "ddpg_config",
     "make_sac",
     "make_td3",
     "pal_loss",
     "policy_of",
-    "resample_time_feature",
 ]

@@ -42,11 +42,11 @@ __all__ = [
     "TD3",
     "TD3Config",
     "TD3State",
+    "augment_time",
     "critic_loss",
     "ddpg_config",
     "make_td3",
     "pal_loss",
-    "resample_time_feature",
 ]
 
 Params = Any
@@ -92,9 +92,10 @@ class TD3Config:
     pal_min_priority: float = 1.0
     """PAL minimum priority: quadratic region of the loss for |td| < pal_min_priority."""
     time_augmentation: bool = False
-    """Observations end with a time feature remaining_steps / max_time. When True, the TD
-    target replaces the next observation's time feature by a fresh uniform draw from
-    {1, ..., max_time} / max_time per sample; the actor loss uses the recorded time. In
+    """Observations end with a time feature remaining_steps / max_time. When True, each
+    critic sample gets a random time-to-go k ~ U{1, ..., max_time}: the current time k /
+    max_time, the next (k - 1) / max_time, bootstrapping cut at k = 1 (``augment_time``); the
+    actor loss uses the recorded time. In
     ``ilfo train`` the trainer decides whether observations carry the feature (fixed-horizon
     runs do), and this applies only where they do."""
     max_time: int = 1000
@@ -242,11 +243,25 @@ def critic_loss(
     raise ValueError(f"unknown loss {loss!r}")
 
 
-def resample_time_feature(key: jax.Array, obs: jax.Array, max_time: int) -> jax.Array:
-    """Replace the last feature of obs (B, obs_dim) by k / max_time, k ~ U{1, ..., max_time}
-    independently per row. Other features are returned unchanged."""
-    k = jax.random.randint(key, obs.shape[:-1], 1, max_time + 1)
-    return obs.at[..., -1].set(k.astype(obs.dtype) / max_time)
+def augment_time(
+    key: jax.Array, obs: jax.Array, next_obs: jax.Array, max_time: int
+) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """Time augmentation of a critic batch, as the OOPS paper's code does it.
+
+    Draws a time-to-go k ~ U{1, ..., max_time} per row and sets the last feature (the time) of
+    ``obs`` (B, d) to k / max_time and of ``next_obs`` to (k - 1) / max_time; the transition
+    ends the episode exactly when k = 1. Returns (obs, next_obs, not_done (B,)).
+
+    Every stored transition thus trains the critic's finite-horizon backup
+    Q(s, a, k) = r + gamma * Q(s', a', k - 1) at a random k, not only at its recorded time, so
+    the critic is defined at every (state, time) pair its targets query. The recorded
+    termination flag is not used: this is only valid for fixed-horizon episodes, in which
+    termination never cuts an episode short (the trainer enables it only there).
+    """
+    k = jax.random.randint(key, obs.shape[:-1], 1, max_time + 1).astype(obs.dtype)
+    obs = obs.at[..., -1].set(k / max_time)
+    next_obs = next_obs.at[..., -1].set((k - 1.0) / max_time)
+    return obs, next_obs, (k > 1.0).astype(obs.dtype)
 
 
 def make_td3(
@@ -306,10 +321,13 @@ def make_td3(
 
     def update_step(state: TD3State, batch: ReplayData, key: jax.Array):
         k_noise, k_time = jax.random.split(key)
-        next_obs = batch.next_obs
+        critic_obs, next_obs, not_done = batch.obs, batch.next_obs, batch.not_done
         if cfg.time_augmentation:
-            next_obs = resample_time_feature(k_time, next_obs, cfg.max_time)
-        obs_n = normalize(state, batch.obs)
+            critic_obs, next_obs, not_done = augment_time(
+                k_time, critic_obs, next_obs, cfg.max_time
+            )
+        obs_n = normalize(state, batch.obs)  # recorded time: the actor loss's input
+        critic_obs_n = normalize(state, critic_obs)
         next_obs_n = normalize(state, next_obs)
 
         # Critic: TD target from target networks, with target policy smoothing.
@@ -319,11 +337,11 @@ def make_td3(
             noise = jnp.clip(noise, -noise_clip, noise_clip)
             next_action = jnp.clip(next_action + noise, -max_action, max_action)
         next_q = jnp.min(critic.apply(state.critic_target, next_obs_n, next_action), axis=0)
-        target = batch.reward + cfg.gamma * batch.not_done * next_q
+        target = batch.reward + cfg.gamma * not_done * next_q
         target = jax.lax.stop_gradient(target)
 
         def critic_loss_fn(params: Params) -> tuple[jax.Array, jax.Array]:
-            q = critic.apply(params, obs_n, batch.action)  # (num_critics, B)
+            q = critic.apply(params, critic_obs_n, batch.action)  # (num_critics, B)
             loss = critic_loss(q - target, cfg.loss, cfg.pal_alpha, cfg.pal_min_priority)
             return loss, jnp.mean(q)
 
