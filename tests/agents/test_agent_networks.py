@@ -42,3 +42,19 @@ def test_actors_shapes_and_bounds():
     mean, log_std = gauss.apply(gauss.init(jax.random.PRNGKey(2), obs), obs)
     assert mean.shape == log_std.shape == (7, 2)
     assert np.all((np.asarray(log_std) >= -5.0) & (np.asarray(log_std) <= 1.0))
+
+
+def test_torch_init_is_pytorch_linear_default():
+    obs, act = jnp.ones((5, 30)), jnp.ones((5, 2))
+    params = CriticEnsemble((400, 300), num_critics=2, init_scheme="torch").init(
+        jax.random.PRNGKey(0), obs, act
+    )["params"]["ensemble"]["MLP_0"]
+    for name, fan_in in (("Dense_0", 32), ("Dense_1", 400), ("Dense_2", 300)):
+        bound = 1.0 / np.sqrt(fan_in)
+        for leaf in ("kernel", "bias"):
+            w = np.asarray(params[name][leaf])
+            assert np.all(np.abs(w) <= bound)
+            if w.size >= 100:  # uniform on [-bound, bound]: std bound / sqrt(3), biases too
+                np.testing.assert_allclose(w.std(), bound / np.sqrt(3), rtol=0.1)
+    flax_default = CriticEnsemble((400, 300), num_critics=2).init(jax.random.PRNGKey(0), obs, act)
+    assert not np.any(flax_default["params"]["ensemble"]["MLP_0"]["Dense_0"]["bias"])

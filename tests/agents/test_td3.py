@@ -223,8 +223,8 @@ def test_time_augmentation_critic_ignores_recorded_times_and_ends():
     # Without augmentation the recorded time of s' matters.
     plain = make_td3(TD3Config(**TINY), OBS_DIM, ACT_DIM, MAX_ACTION)
     p0 = plain.init(0)
-    a, _ = plain.update(p0, buf.data, buf.size, num_updates=1)
-    b, _ = plain.update(p0, buf.data._replace(next_obs=other.next_obs), buf.size, num_updates=1)
+    a, _ = plain.update(p0, buf.data, buf.size, num_updates=4)
+    b, _ = plain.update(p0, buf.data._replace(next_obs=other.next_obs), buf.size, num_updates=4)
     assert not tree_allclose(a.critic_params, b.critic_params)
 
 

@@ -9,6 +9,12 @@ All modules take batch-first inputs and accept any leading batch shape:
 - ``SquashedGaussianActor``: obs -> (mean, log_std) of the pre-tanh Gaussian, both
   (..., action_dim); use ``sample_squashed`` / ``deterministic_squashed`` to get actions.
 
+Initialisation (``init_scheme``): ``"flax"`` (flax's default: LeCun-normal weights, zero biases) or
+``"torch"`` (PyTorch's ``nn.Linear`` default, which the OOPS paper's code and Fujimoto's TD3 use:
+weights and biases uniform in +-1/sqrt(fan_in)). They differ several-fold in scale: with
+"torch" a fresh actor's actions and critic's values start near 0; with "flax" they start ~5-10x
+larger.
+
 Observation normalisation is not done here: the agents apply ``(obs - mean) / std`` before
 calling the networks, so the networks stay plain functions of their inputs.
 """
@@ -16,6 +22,7 @@ calling the networks, so the networks stay plain functions of their inputs.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Literal
 
 import flax.linen as nn
 import jax
@@ -33,6 +40,24 @@ __all__ = [
 
 _LOG_2 = float(jnp.log(2.0))
 
+InitName = Literal["flax", "torch"]
+
+
+def dense(features: int, fan_in: int, init_scheme: InitName) -> nn.Dense:
+    """A dense layer initialised as ``init_scheme`` says (see the module docstring)."""
+    if init_scheme == "flax":
+        return nn.Dense(features)
+    if init_scheme != "torch":
+        raise ValueError(f"init_scheme must be 'flax' or 'torch', got {init_scheme!r}")
+    bound = 1.0 / fan_in**0.5
+
+    def bias_init(key: jax.Array, shape: Sequence[int], dtype=jnp.float32) -> jax.Array:
+        return jax.random.uniform(key, shape, dtype, -bound, bound)
+
+    # variance_scaling(1/3, fan_in, uniform) draws from +-sqrt(3 * (1/3) / fan_in) = +-bound.
+    kernel_init = nn.initializers.variance_scaling(1.0 / 3.0, "fan_in", "uniform")
+    return nn.Dense(features, kernel_init=kernel_init, bias_init=bias_init)
+
 
 class MLP(nn.Module):
     """ReLU multilayer perceptron with a linear output layer.
@@ -42,12 +67,13 @@ class MLP(nn.Module):
 
     hidden: Sequence[int]
     out_dim: int
+    init_scheme: InitName = "flax"
 
     @nn.compact
     def __call__(self, x: jax.Array) -> jax.Array:
         for width in self.hidden:
-            x = nn.relu(nn.Dense(width)(x))
-        return nn.Dense(self.out_dim)(x)
+            x = nn.relu(dense(width, x.shape[-1], self.init_scheme)(x))
+        return dense(self.out_dim, x.shape[-1], self.init_scheme)(x)
 
 
 class DeterministicActor(nn.Module):
@@ -56,21 +82,23 @@ class DeterministicActor(nn.Module):
     hidden: Sequence[int]
     action_dim: int
     max_action: float | jax.Array = 1.0
+    init_scheme: InitName = "flax"
 
     @nn.compact
     def __call__(self, obs: jax.Array) -> jax.Array:
-        return self.max_action * jnp.tanh(MLP(self.hidden, self.action_dim)(obs))
+        return self.max_action * jnp.tanh(MLP(self.hidden, self.action_dim, self.init_scheme)(obs))
 
 
 class Critic(nn.Module):
     """One Q-function: (obs (..., obs_dim), action (..., action_dim)) -> Q (...)."""
 
     hidden: Sequence[int]
+    init_scheme: InitName = "flax"
 
     @nn.compact
     def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
         x = jnp.concatenate([obs, action], axis=-1)
-        return MLP(self.hidden, 1)(x)[..., 0]
+        return MLP(self.hidden, 1, self.init_scheme)(x)[..., 0]
 
 
 class CriticEnsemble(nn.Module):
@@ -86,6 +114,7 @@ class CriticEnsemble(nn.Module):
 
     hidden: Sequence[int]
     num_critics: int = 2
+    init_scheme: InitName = "flax"
 
     @nn.compact
     def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
@@ -97,7 +126,7 @@ class CriticEnsemble(nn.Module):
             out_axes=0,
             axis_size=self.num_critics,
         )
-        return ensemble(self.hidden, name="ensemble")(obs, action)
+        return ensemble(self.hidden, self.init_scheme, name="ensemble")(obs, action)
 
 
 class SquashedGaussianActor(nn.Module):

@@ -35,7 +35,7 @@ from ilfo.agents._common import (
     make_optimizer,
     scan_updates,
 )
-from ilfo.agents.networks import CriticEnsemble, DeterministicActor
+from ilfo.agents.networks import CriticEnsemble, DeterministicActor, InitName
 from ilfo.replay import ReplayData
 
 __all__ = [
@@ -98,11 +98,17 @@ class TD3Config:
     actor loss uses the recorded time. In
     ``ilfo train`` the trainer decides whether observations carry the feature (fixed-horizon
     runs do), and this applies only where they do."""
+    init_scheme: InitName = "torch"
+    """Network initialisation: "torch" (PyTorch's nn.Linear default, uniform +-1/sqrt(fan_in)
+    for weights and biases, as the paper's and Fujimoto's code) or "flax" (LeCun normal, zero
+    biases)."""
     max_time: int = 1000
     """Scale of the time feature and upper end of its resampling range (the episode horizon);
     set by the trainer to the episode horizon in ``ilfo train``."""
 
     def __post_init__(self) -> None:
+        if self.init_scheme not in ("flax", "torch"):
+            raise ValueError(f"init_scheme must be 'flax' or 'torch', got {self.init_scheme!r}")
         if self.loss not in ("pal", "mse", "huber"):
             raise ValueError(f"loss must be 'pal', 'mse' or 'huber', got {self.loss!r}")
         if self.num_critics < 1 or self.policy_delay < 1 or self.batch_size < 1:
@@ -280,9 +286,9 @@ def make_td3(
     max_action = as_float_bound(max_action)
     if cfg.time_augmentation and obs_dim < 2:
         raise ValueError("time augmentation needs observations with a trailing time feature")
-    actor = DeterministicActor(cfg.actor_hidden, action_dim, max_action)
-    critic = CriticEnsemble(cfg.critic_hidden, cfg.num_critics)
-    first_critic = CriticEnsemble(cfg.critic_hidden, 1)
+    actor = DeterministicActor(cfg.actor_hidden, action_dim, max_action, cfg.init_scheme)
+    critic = CriticEnsemble(cfg.critic_hidden, cfg.num_critics, cfg.init_scheme)
+    first_critic = CriticEnsemble(cfg.critic_hidden, 1, cfg.init_scheme)
     actor_opt = optax.adam(cfg.lr_actor)
     critic_opt = make_optimizer(cfg.lr_critic, cfg.critic_grad_clip)
     noise_scale = cfg.target_noise * max_action
