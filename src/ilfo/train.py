@@ -196,7 +196,7 @@ class TrainConfig:
     def agent_config(self, horizon: int) -> TD3Config | SACConfig:
         """The agent's config exactly as the run builds it, for episodes of ``horizon`` steps.
 
-        TD3: time augmentation (resampling the time feature in the TD target) needs the feature,
+        TD3: time augmentation (a random time-to-go for each critic sample) needs the feature,
         which only fixed-horizon runs append to observations, so it is on where both the config
         and the run say so; ``max_time`` is the horizon; oops-ddpg applies ``ddpg_config``.
         """

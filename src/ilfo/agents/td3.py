@@ -1,8 +1,8 @@
 """TD3 (Fujimoto, van Hoof, Meger 2018) with the options the OOPS paper's code uses.
 
 Options beyond plain TD3: the PAL critic loss (Fujimoto, Meger, Precup 2020), critic gradient
-clipping, time augmentation of the TD target, an observation normaliser fixed once, and DDPG as a
-configuration (``ddpg_config``).
+clipping, time augmentation of the critic's samples (``augment_time``), PyTorch's initialisation,
+an observation normaliser fixed once, and DDPG as a configuration (``ddpg_config``).
 
 Usage::
 
@@ -103,7 +103,7 @@ class TD3Config:
     for weights and biases, as the paper's and Fujimoto's code) or "flax" (LeCun normal, zero
     biases)."""
     max_time: int = 1000
-    """Scale of the time feature and upper end of its resampling range (the episode horizon);
+    """Scale of the time feature and the largest time-to-go drawn by augmentation (the horizon);
     set by the trainer to the episode horizon in ``ilfo train``."""
 
     def __post_init__(self) -> None:
