@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from ilfo.envs import episode_scores, make_env
+from ilfo.envs import episode_scores, make_env, termination_is_finish
 
 
 def _run(env, seed):
@@ -58,3 +58,17 @@ def test_bipedal_walker_in_fixed_horizon_mode():
         if truncated:
             break
     assert steps == 120
+
+
+def test_a_bipedal_walker_fall_is_not_a_finish():
+    # Full power on every joint throws the walker over: gymnasium's fall reward is exactly -100.
+    env = make_env("BipedalWalker-v3", True, horizon=400)
+    env.reset(seed=0)
+    for _ in range(400):
+        _, reward, _, _, info = env.step(np.ones(4))
+        if info["env_terminated"]:
+            break
+    assert info["env_terminated"] and reward == -100.0
+    assert not termination_is_finish("BipedalWalker-v3", reward)
+    assert termination_is_finish("BipedalWalker-v3", 0.4)  # passing the end of the course
+    assert not termination_is_finish("Hopper-v5", 0.4)  # a MuJoCo termination is a fall

@@ -117,6 +117,30 @@ def test_demos_where_the_expert_falls_are_skipped_and_recorded(tiny_run, tmp_pat
     assert len(kept_all) == 3 and demos.load(tmp_path / "k.npz").provenance["seeds"] == [10, 11, 12]
 
 
+def test_demos_end_at_a_finish_and_skip_falls(tiny_run, tmp_path, monkeypatch):
+    import ilfo.experts
+    from ilfo.experts import ExpertPolicy
+
+    expert = load_expert(export_expert(tiny_run, tmp_path / "Hopper-v5"))
+    real = expert.rollout(seed=0)
+
+    def rollout(self, seed):  # terminates from step 40 on: a finish on even seeds, a fall on odd
+        rewards = real.rewards.copy()
+        rewards[40] = -100.0 if seed % 2 else 1.0
+        return real._replace(rewards=rewards, env_terminated=np.arange(len(rewards)) >= 40)
+
+    monkeypatch.setattr(ExpertPolicy, "rollout", rollout)
+    monkeypatch.setattr(ilfo.experts, "termination_is_finish", lambda env, r: r != -100.0)
+    episodes = collect_demos(expert, 2, tmp_path / "d.npz", first_seed=0)
+    assert demos.load(tmp_path / "d.npz").provenance["skipped_seeds_with_a_fall"] == [1]
+    for e in episodes:  # cut after the finishing step, as a standard episode ends
+        assert len(e.observations) == 42 and len(e.rewards) == 41 and len(e.actions) == 41
+        np.testing.assert_array_equal(e.observations, real.observations[:42])
+    # --keep-falls keeps a fall at full length
+    kept = collect_demos(expert, 2, tmp_path / "k.npz", first_seed=1, skip_falls=False)
+    assert [len(e.rewards) for e in kept] == [100, 41]
+
+
 def test_missing_expert_is_a_clear_error(tmp_path, capsys):
     with pytest.raises(FileNotFoundError, match="no expert"):
         load_expert(tmp_path)

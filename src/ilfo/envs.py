@@ -87,6 +87,22 @@ def make_env(
     return env
 
 
+# Envs whose termination also marks success: BipedalWalker terminates when the walker falls or
+# walks off the start (reward exactly -100 on that step), and when it passes the end of the
+# course (a normal shaping reward). In fixed-horizon episodes the steps after the finish are the
+# walker beyond the terrain: no part of the task.
+_FALL_REWARD = {"BipedalWalker-v3": -100.0}
+
+
+def termination_is_finish(env_id: str, reward: float) -> bool:
+    """Whether a step on which ``env_id`` reported termination, with task ``reward``, is the
+    task completed (BipedalWalker reaching the end of its course) rather than a fall.
+
+    Every termination of the MuJoCo and Minitaur tasks is a fall (unhealthy state)."""
+    fall_reward = _FALL_REWARD.get(env_id)
+    return fall_reward is not None and float(reward) != fall_reward
+
+
 def episode_scores(rewards: np.ndarray, env_terminated: np.ndarray) -> tuple[float, float]:
     """Both scores of one fixed-horizon episode: (fixed-horizon score, standard return).
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from ilfo import demos as demo_io
 from ilfo.agents import Policy, policy_of
-from ilfo.envs import make_env
+from ilfo.envs import make_env, termination_is_finish
 from ilfo.paths import DATA_DIR
 from ilfo.train import (
     BEST_POLICY_FILE,
@@ -140,7 +140,10 @@ def collect_demos(
     Episodes run on seeds ``first_seed``, ``first_seed + 1``, ... With ``skip_falls`` an episode
     in which the environment reports a fall (termination, ignored in these fixed-horizon
     rollouts) is not kept and the next seed is tried: a demonstration should show the task done.
-    The kept and the skipped seeds are recorded in the file's provenance.
+    The kept and the skipped seeds are recorded in the file's provenance. Where termination
+    marks the task completed (BipedalWalker passing the end of its course,
+    ``envs.termination_is_finish``), the demo ends with that step, as a standard episode does:
+    what follows is the walker beyond the terrain.
 
     Raises:
         ValueError: ``num_episodes`` < 1, or fewer than ``num_episodes`` episodes without a fall in
@@ -159,12 +162,17 @@ def collect_demos(
                 "(--keep-falls / skip_falls=False)."
             )
         rollout = expert.rollout(seed=seed)
-        if skip_falls and rollout.env_terminated.any():
+        obs, rewards = rollout.observations, rollout.rewards
+        ends = np.flatnonzero(rollout.env_terminated)
+        if ends.size and termination_is_finish(expert.config.env, rewards[ends[0]]):
+            obs, rewards = obs[: ends[0] + 2], rewards[: ends[0] + 1]
+        elif ends.size and skip_falls:
             skipped.append(seed)
-        else:
-            actions = _replay_actions(expert, rollout.observations)
-            episodes.append(demo_io.Episode(rollout.observations, actions, rollout.rewards))
-            seeds.append(seed)
+            seed += 1
+            continue
+        actions = _replay_actions(expert, obs)
+        episodes.append(demo_io.Episode(obs, actions, rewards))
+        seeds.append(seed)
         seed += 1
     demo_io.save(
         out,
@@ -198,7 +206,7 @@ def write_card(directory: str | Path) -> dict[str, Any]:
         "seed": cfg["seed"],
         "date": time.strftime("%Y-%m-%d"),
         "num_demos": len(data.episodes),
-        "demo_length": int(len(data.episodes[0].observations) - 1),
+        "demo_lengths": [int(len(e.observations) - 1) for e in data.episodes],
         "return_mean": float(returns.mean()),
         "return_std": float(returns.std()),
         "demo_seeds": data.provenance.get("seeds"),
