@@ -48,7 +48,7 @@ def test_export_load_collect_and_card(tiny_run, tmp_path):
     np.testing.assert_array_equal(again[0].observations, episodes[0].observations)
     card = write_card(out)
     assert card["num_demos"] == 2 and card["steps_trained"] >= 400
-    assert card["return_mean"] == pytest.approx(np.mean([e.task_return for e in episodes]))
+    assert card["return_mean"] == pytest.approx(np.mean([e.task_score for e in episodes]))
     assert set(card["sha256"]) == {"policy.msgpack", "expert.json", "demos.npz"}
     result = evaluate_expert(out, 2)
     assert result["episodes"] == 2 and np.isfinite(result["return_mean"])
@@ -117,7 +117,9 @@ def test_demos_where_the_expert_falls_are_skipped_and_recorded(tiny_run, tmp_pat
     assert len(kept_all) == 3 and demos.load(tmp_path / "k.npz").provenance["seeds"] == [10, 11, 12]
 
 
-def test_demos_end_at_a_finish_and_skip_falls(tiny_run, tmp_path, monkeypatch):
+def test_a_finish_is_kept_at_full_length_and_scored_as_the_evaluation(
+    tiny_run, tmp_path, monkeypatch
+):
     import ilfo.experts
     from ilfo.experts import ExpertPolicy
 
@@ -125,20 +127,23 @@ def test_demos_end_at_a_finish_and_skip_falls(tiny_run, tmp_path, monkeypatch):
     real = expert.rollout(seed=0)
 
     def rollout(self, seed):  # terminates from step 40 on: a finish on even seeds, a fall on odd
-        rewards = real.rewards.copy()
-        rewards[40] = -100.0 if seed % 2 else 1.0
+        rewards = np.ones_like(real.rewards)
+        rewards[40] = -100.0 if seed % 2 else 0.5
         return real._replace(rewards=rewards, env_terminated=np.arange(len(rewards)) >= 40)
 
     monkeypatch.setattr(ExpertPolicy, "rollout", rollout)
     monkeypatch.setattr(ilfo.experts, "termination_is_finish", lambda env, r: r != -100.0)
-    episodes = collect_demos(expert, 2, tmp_path / "d.npz", first_seed=0)
-    assert demos.load(tmp_path / "d.npz").provenance["skipped_seeds_with_a_fall"] == [1]
-    for e in episodes:  # cut after the finishing step, as a standard episode ends
-        assert len(e.observations) == 42 and len(e.rewards) == 41 and len(e.actions) == 41
-        np.testing.assert_array_equal(e.observations, real.observations[:42])
-    # --keep-falls keeps a fall at full length
+    collect_demos(expert, 2, tmp_path / "d.npz", first_seed=0)
+    loaded = demos.load(tmp_path / "d.npz")
+    assert loaded.provenance["skipped_seeds_with_a_fall"] == [1]
+    for e in loaded.episodes:  # full length, terminations recorded, scored as evaluated
+        assert len(e.observations) == 101 and e.terminated.dtype == bool
+        np.testing.assert_array_equal(e.terminated, np.arange(100) >= 40)
+        assert e.task_return == pytest.approx(99.5) and e.task_score == pytest.approx(40.0)
+    assert demos.summarize(loaded)["return_mean"] == pytest.approx(40.0)
+    # --keep-falls keeps a fall
     kept = collect_demos(expert, 2, tmp_path / "k.npz", first_seed=1, skip_falls=False)
-    assert [len(e.rewards) for e in kept] == [100, 41]
+    assert [e.task_score for e in kept] == [40.0, 40.0]
 
 
 def test_missing_expert_is_a_clear_error(tmp_path, capsys):

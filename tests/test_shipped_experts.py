@@ -29,7 +29,7 @@ def test_checksums_and_demos_match_the_card(directory):
         assert hashlib.sha256((directory / name).read_bytes()).hexdigest() == digest, name
     data = demos.load(directory / "demos.npz")
     assert data.env_id == card["env_id"] and len(data.episodes) == card["num_demos"]
-    returns = [e.task_return for e in data.episodes]
+    returns = [e.task_score for e in data.episodes]
     assert np.mean(returns) == pytest.approx(card["return_mean"])
     assert [len(e.observations) - 1 for e in data.episodes] == card["demo_lengths"]
 

@@ -435,10 +435,10 @@ def _run_demos_collect(args: argparse.Namespace) -> int:
     episodes = collect_demos(
         expert, args.episodes, args.out, first_seed=args.seed, skip_falls=not args.keep_falls
     )
-    returns = np.array([e.task_return for e in episodes])
+    returns = np.array([e.task_score for e in episodes])
     print(
         f"wrote {args.out}: {len(episodes)} episodes of {len(episodes[0].observations) - 1} "
-        f"steps, return {returns.mean():.1f} +- {returns.std():.1f}"
+        f"steps, return {returns.mean():.1f} +- {returns.std():.1f} (fixed-horizon score)"
     )
     return 0
 

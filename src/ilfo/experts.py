@@ -142,8 +142,10 @@ def collect_demos(
     rollouts) is not kept and the next seed is tried: a demonstration should show the task done.
     The kept and the skipped seeds are recorded in the file's provenance. Where termination
     marks the task completed (BipedalWalker passing the end of its course,
-    ``envs.termination_is_finish``), the demo ends with that step, as a standard episode does:
-    what follows is the walker beyond the terrain.
+    ``envs.termination_is_finish``), the episode is kept at full length, as the paper's code
+    keeps it (the walker walks on past the finish; learner episodes run the same horizon), and
+    the steps the environment reported as terminated are recorded (``Episode.terminated``), so
+    the demo's ``task_score`` counts them as 0, as the evaluation does.
 
     Raises:
         ValueError: ``num_episodes`` < 1, or fewer than ``num_episodes`` episodes without a fall in
@@ -162,17 +164,20 @@ def collect_demos(
                 "(--keep-falls / skip_falls=False)."
             )
         rollout = expert.rollout(seed=seed)
-        obs, rewards = rollout.observations, rollout.rewards
         ends = np.flatnonzero(rollout.env_terminated)
-        if ends.size and termination_is_finish(expert.config.env, rewards[ends[0]]):
-            obs, rewards = obs[: ends[0] + 2], rewards[: ends[0] + 1]
-        elif ends.size and skip_falls:
+        fell = ends.size > 0 and not termination_is_finish(
+            expert.config.env, rollout.rewards[ends[0]]
+        )
+        if skip_falls and fell:
             skipped.append(seed)
-            seed += 1
-            continue
-        actions = _replay_actions(expert, obs)
-        episodes.append(demo_io.Episode(obs, actions, rewards))
-        seeds.append(seed)
+        else:
+            actions = _replay_actions(expert, rollout.observations)
+            episodes.append(
+                demo_io.Episode(
+                    rollout.observations, actions, rollout.rewards, rollout.env_terminated
+                )
+            )
+            seeds.append(seed)
         seed += 1
     demo_io.save(
         out,
@@ -196,7 +201,7 @@ def write_card(directory: str | Path) -> dict[str, Any]:
     directory = Path(directory)
     record = json.loads((directory / EXPERT_FILE).read_text())
     data = demo_io.load(directory / DEMOS_FILE)
-    returns = np.array([e.task_return for e in data.episodes])
+    returns = np.array([e.task_score for e in data.episodes])
     cfg = record["train_config"]
     card = {
         "env_id": cfg["env"],

@@ -371,7 +371,7 @@ class Trainer:
                     f"demos have observations of dimension {self.demos[0].shape[1]}, "
                     f"{config.env} has {self.obs_dim}"
                 )
-            returns = [e.task_return for e in episodes if e.task_return is not None]
+            returns = [e.task_score for e in episodes if e.task_score is not None]
             self.demo_return = float(np.mean(returns)) if returns else math.nan
             self.distance_probe: OOPS | None = OOPS(self.demos[:1])
         else:

@@ -33,6 +33,22 @@ def test_round_trip(tmp_path, with_extras):
             assert got.actions is None and got.task_return is None
 
 
+def test_terminations_round_trip_and_score(tmp_path):
+    obs, rewards = np.zeros((5, 3)), np.array([1.0, 2.0, 3.0, 4.0])
+    terminated = np.array([False, False, True, True])
+    path = tmp_path / "t.npz"
+    demos.save(path, [Episode(obs, None, rewards, terminated)], "BipedalWalker-v3")
+    (got,) = demos.load(path).episodes
+    np.testing.assert_array_equal(got.terminated, terminated)
+    assert got.task_return == 10.0 and got.task_score == 3.0  # terminated steps count 0
+    assert Episode(obs, None, rewards).task_score == 10.0  # none recorded: the plain return
+    bad = tmp_path / "bad.npz"
+    arrays = dict(np.load(path, allow_pickle=False))
+    np.savez(bad, **{**arrays, "terminated": np.array([0.0, 0.0, 1.0, 1.0])})
+    with pytest.raises(ValueError, match="terminated must be boolean"):
+        demos.load(bad)
+
+
 def test_bad_files(tmp_path):
     with pytest.raises(FileNotFoundError):
         demos.load(tmp_path / "missing.npz")

@@ -2,8 +2,8 @@
 
 Layout (schema 1): ``schema_version`` (int), ``env_id`` (str), ``provenance`` (JSON str),
 ``episode_lengths`` (N,) number of observations of each episode (T_i + 1), ``observations``
-(sum_i (T_i + 1), obs_dim) all episodes end to end, and optionally ``actions`` and ``rewards``
-(sum_i T_i, ...) kept for analysis only: a learner never sees them.
+(sum_i (T_i + 1), obs_dim) all episodes end to end, and optionally ``actions``, ``rewards`` and
+``terminated`` (sum_i T_i, ...) kept for analysis only: a learner never sees them.
 """
 
 from __future__ import annotations
@@ -29,16 +29,29 @@ class Episode:
         observations: Shape (T + 1, obs_dim).
         actions: Shape (T, act_dim), or None. Analysis only.
         rewards: Shape (T,), or None. Analysis only.
+        terminated: Shape (T,) bool, or None: the steps on which the environment reported
+            termination, in a fixed-horizon episode that went on past it. Analysis only.
     """
 
     observations: np.ndarray
     actions: np.ndarray | None = None
     rewards: np.ndarray | None = None
+    terminated: np.ndarray | None = None
 
     @property
     def task_return(self) -> float | None:
         """Sum of the recorded task rewards, or None where none were recorded."""
         return None if self.rewards is None else float(self.rewards.sum())
+
+    @property
+    def task_score(self) -> float | None:
+        """The paper's fixed-horizon score: the task rewards summed with those of steps on which
+        the environment reported termination counted as 0 (what ``ilfo train`` evaluates and
+        divides by the demos' mean). Equal to ``task_return`` where no termination was
+        recorded; None where no rewards were."""
+        if self.rewards is None or self.terminated is None:
+            return self.task_return
+        return float(np.where(self.terminated, 0.0, self.rewards).sum())
 
 
 @dataclass(frozen=True)
@@ -67,7 +80,7 @@ def save(
         "episode_lengths": lengths,
         "observations": np.concatenate([e.observations for e in episodes]),
     }
-    for name in ("actions", "rewards"):
+    for name in ("actions", "rewards", "terminated"):
         parts = [getattr(e, name) for e in episodes]
         if all(p is not None for p in parts):
             arrays[name] = np.concatenate(parts)
@@ -98,12 +111,14 @@ def load(path: str | Path) -> DemoFile:
     bounds = np.concatenate([[0], np.cumsum(lengths)])
     step_bounds = np.concatenate([[0], np.cumsum(lengths - 1)])
     extras = {}
-    for name in ("actions", "rewards"):
+    for name in ("actions", "rewards", "terminated"):
         if name in data:
             if len(data[name]) != step_bounds[-1]:
                 raise ValueError(
                     f"{path}: {name} has {len(data[name])} rows, not {step_bounds[-1]}"
                 )
+            if name == "terminated" and data[name].dtype != np.bool_:
+                raise ValueError(f"{path}: terminated must be boolean, not {data[name].dtype}")
             extras[name] = data[name]
     episodes = [
         Episode(

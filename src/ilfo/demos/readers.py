@@ -163,13 +163,15 @@ def summarize(demo: DemoFile) -> dict[str, Any]:
     Returns a JSON-serialisable dict: ``env_id``, ``episodes``, ``transitions`` (sum of T_i),
     ``lengths`` (list of T_i), ``length_min``/``length_mean``/``length_max``, ``obs_dim``,
     ``action_dim`` (None without actions), ``return_mean``/``return_std``/``return_min``/
-    ``return_max`` (None unless every episode has rewards) and ``provenance``.
+    ``return_max`` (None unless every episode has rewards; an episode that recorded the steps
+    the environment reported as terminated scores them 0, ``Episode.task_score``) and
+    ``provenance``.
     """
     if not demo.episodes:
         raise ValueError("no episodes to summarize")
     lengths = [len(e.observations) - 1 for e in demo.episodes]
     first = demo.episodes[0]
-    returns = [e.task_return for e in demo.episodes]
+    returns = [e.task_score for e in demo.episodes]
     out: dict[str, Any] = {
         "env_id": demo.env_id,
         "episodes": len(lengths),
@@ -554,7 +556,8 @@ def _env_id_from_spec(spec: Any) -> str:
 
 def _checked(episodes: list[Episode], path: Path) -> list[Episode]:
     """Episodes with observations (T + 1, d) as floats, actions (T, a), rewards (T,), all finite
-    and with the same d and a throughout; raise ValueError naming the first problem."""
+    and with the same d and a throughout, terminated (T,) boolean; raise ValueError naming the
+    first problem."""
     if not episodes:
         raise ValueError(f"{path} holds no episodes")
     out = []
@@ -602,5 +605,13 @@ def _checked(episodes: list[Episode], path: Path) -> list[Episode]:
             rewards = rewards.astype(np.float64)
             if not np.isfinite(rewards).all():
                 raise ValueError(f"{where}: rewards contain NaN or inf")
-        out.append(Episode(observations=obs, actions=actions, rewards=rewards))
+        terminated = ep.terminated
+        if terminated is not None and (
+            terminated.dtype != np.bool_ or terminated.shape != (steps,)
+        ):
+            raise ValueError(
+                f"{where}: terminated must be boolean of shape ({steps},), got "
+                f"{terminated.dtype} {terminated.shape}"
+            )
+        out.append(Episode(obs, actions, rewards, terminated))
     return out
