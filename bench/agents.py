@@ -239,11 +239,15 @@ def make_torch_td3(
         idx = torch.randint(0, size, (cfg.batch_size,))
         obs, action, reward = data["obs"][idx], data["action"][idx], data["reward"][idx]
         next_obs, not_done = data["next_obs"][idx], data["not_done"][idx]
-        if cfg.time_augmentation:
-            k = torch.randint(1, cfg.max_time + 1, (cfg.batch_size,))
-            next_obs = next_obs.clone()
-            next_obs[:, -1] = k.float() / cfg.max_time
+        critic_obs = obs
+        if cfg.time_augmentation:  # as ilfo's augment_time: time-to-go k now, k - 1 next
+            k = torch.randint(1, cfg.max_time + 1, (cfg.batch_size,)).float()
+            critic_obs, next_obs = obs.clone(), next_obs.clone()
+            critic_obs[:, -1] = k / cfg.max_time
+            next_obs[:, -1] = (k - 1.0) / cfg.max_time
+            not_done = (k > 1.0).float()
         obs_n = (obs - obs_mean) / obs_std
+        critic_obs_n = (critic_obs - obs_mean) / obs_std
         next_obs_n = (next_obs - obs_mean) / obs_std
         with torch.no_grad():
             next_action = pi(actor_target, next_obs_n)
@@ -252,7 +256,7 @@ def make_torch_td3(
                 next_action = (next_action + noise).clamp(-max_action, max_action)
             next_q = q_all(critics_target, next_obs_n, next_action).min(dim=0).values
             target = reward + cfg.gamma * not_done * next_q
-        td = q_all(critics, obs_n, action) - target
+        td = q_all(critics, critic_obs_n, action) - target
         loss = pal(td) if cfg.loss == "pal" else (td**2).mean(dim=-1).sum()
         critic_opt.zero_grad()
         loss.backward()
