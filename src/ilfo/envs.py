@@ -89,8 +89,8 @@ def make_env(
 
 # Envs whose termination also marks success: BipedalWalker terminates when the walker falls or
 # walks off the start (reward exactly -100 on that step), and when it passes the end of the
-# course (a normal shaping reward). In fixed-horizon episodes the steps after the finish are the
-# walker beyond the terrain: no part of the task.
+# course (a normal shaping reward). In fixed-horizon episodes the walker walks on past the
+# finish, every later step reported as terminated, so the fixed-horizon score counts them 0.
 _FALL_REWARD = {"BipedalWalker-v3": -100.0}
 
 
