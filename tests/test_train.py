@@ -94,6 +94,9 @@ def test_cli_train_and_eval_and_plot(tmp_path, capsys):
     assert main(["eval", str(run), "--episodes", "2", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["episodes"] == 2 and "score_norm" in result
+    assert result["policy"] == "policy.msgpack"
+    assert main(["eval", str(run), "--episodes", "1", "--best", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["policy"] == "best_policy.msgpack"
     out = tmp_path / "curves.png"
     assert main(["plot", str(run), "--out", str(out)]) == 0
     assert out.stat().st_size > 0

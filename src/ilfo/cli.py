@@ -72,8 +72,10 @@ def _add_train_parser(sub: argparse._SubParsersAction) -> None:
         help="Train a policy (default: OOPS+TD3 on Hopper-v5 from one shipped expert demo).",
         description=(
             "Train a policy from state-only demonstrations (or on the task reward for td3/sac). "
-            "Writes runs/<env>__<algo>__<seed>__<time>/ with config.json, metrics.csv, "
-            "checkpoints/, policy.msgpack and learning_curve.png. Ctrl-C checkpoints; "
+            "Writes runs/<env>__<algo>__<seed>__<time>/ with config.json, metrics.csv, tb/ "
+            "(TensorBoard), checkpoints/, policy.msgpack (the final policy), best_policy.msgpack "
+            "and best_policy.json (the best-evaluated one) and learning_curve.png. Ctrl-C "
+            "checkpoints; "
             "--resume RUN_DIR continues exactly where the run stopped. Every setting, the "
             "agent's and the rewarder's included, is recorded in config.json."
         ),
@@ -144,9 +146,20 @@ def _run_train(args: argparse.Namespace) -> int:
 
 
 def _add_eval_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("eval", help="Evaluate a run's policy (deterministic episodes).")
+    p = sub.add_parser(
+        "eval",
+        help="Evaluate a run's final policy (deterministic episodes).",
+        description=(
+            "Evaluate a run's final policy (policy.msgpack, or its last checkpoint's while the "
+            "run has not finished): the paper's fixed-horizon score and the standard return, "
+            "both normalised by the demos' return, and the OT distance to the first demo."
+        ),
+    )
     p.add_argument("run_dir", help="a run directory written by `ilfo train`")
-    p.add_argument("--episodes", type=int, default=10, help="episodes to run")
+    p.add_argument("--episodes", type=int, default=10, help="episodes to run (default 10)")
+    p.add_argument(
+        "--best", action="store_true", help="evaluate best_policy.msgpack instead of the final one"
+    )
     p.add_argument(
         "--video",
         default=None,
@@ -160,7 +173,9 @@ def _add_eval_parser(sub: argparse._SubParsersAction) -> None:
 def _run_eval(args: argparse.Namespace) -> int:
     from ilfo.evaluate import evaluate_run
 
-    result = evaluate_run(Path(args.run_dir), episodes=args.episodes, video=args.video)
+    result = evaluate_run(
+        Path(args.run_dir), episodes=args.episodes, video=args.video, best=args.best
+    )
     if args.json:
         print(json.dumps(result))
     else:
@@ -177,22 +192,29 @@ def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
         help="SAC on the task reward, checkpointed and resumable in segments.",
         description=(
             "Train a SAC expert on the task reward in runs/experts/<ENV>__sac__<seed>/ (or "
-            "--run-dir). Stop any time (Ctrl-C checkpoints) and continue with --resume, "
-            "possibly with a larger --steps."
+            "--run-dir). Standard episodes (termination handled), evaluated every 10,000 "
+            "steps on 10 episodes; the best-evaluated policy is what `ilfo expert export` "
+            "ships. Stop any time (Ctrl-C checkpoints) and continue with --resume, possibly "
+            "with a larger --steps."
         ),
     )
     t.add_argument("env", help="environment id, e.g. Hopper-v5")
     t.add_argument("--steps", type=int, default=None, help="total steps (default 1,000,000)")
-    t.add_argument("--seed", type=int, default=0, help="seed")
+    t.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     t.add_argument("--resume", action="store_true", help="continue the existing run")
     t.add_argument("--run-dir", default=None, help="run directory (default: see above)")
-    t.add_argument("--checkpoint-every", type=int, default=25_000, help="steps between checkpoints")
+    t.add_argument(
+        "--checkpoint-every",
+        type=int,
+        default=25_000,
+        help="steps between checkpoints (default 25,000)",
+    )
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
     t.set_defaults(run=_run_expert_train)
     x = esub.add_parser("export", help="Export a run's policy as the env's shipped expert.")
     x.add_argument("run_dir", help="the expert's run directory")
     x.add_argument("--out", default=None, help="expert directory (default data/experts/<env>)")
-    x.add_argument("-n", "--num-demos", type=int, default=10, help="demos to collect")
+    x.add_argument("-n", "--num-demos", type=int, default=10, help="demos to collect (default 10)")
     x.add_argument(
         "--which",
         choices=["best", "latest"],
@@ -207,7 +229,9 @@ def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
     x.set_defaults(run=_run_expert_export)
     e = esub.add_parser("eval", help="Mean and std return of a shipped (or given) expert.")
     e.add_argument("env", help="environment id with a shipped expert, or an expert directory")
-    e.add_argument("--episodes", type=int, default=10, help="episodes")
+    e.add_argument(
+        "--episodes", type=int, default=10, help="episodes, seeds 1000, 1001, ... (default 10)"
+    )
     e.add_argument("--json", action="store_true", help="one JSON line")
     e.set_defaults(run=_run_expert_eval)
 
@@ -271,7 +295,9 @@ def _run_expert_eval(args: argparse.Namespace) -> int:
 def _add_plot_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("plot", help="Plot evaluation curves of runs (mean and spread over seeds).")
     p.add_argument("run_dirs", nargs="+", help="run directories")
-    p.add_argument("--out", default="learning_curves.png", help="output image")
+    p.add_argument(
+        "--out", default="learning_curves.png", help="output image (default learning_curves.png)"
+    )
     p.add_argument(
         "--metric",
         default=None,
@@ -308,16 +334,34 @@ def _add_reward_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--learners", type=int, nargs="*", default=None, help="indices of learner episodes"
     )
-    p.add_argument("--rewarder", choices=["oops", "pwil"], default="oops")
+    p.add_argument(
+        "--rewarder", choices=["oops", "pwil"], default="oops", help="reward (default oops)"
+    )
     docs = {f.name: (f.default, f.type) for f in fields(OOPSConfig)}
-    p.add_argument("--solver", default=docs["solver"][0], choices=["sinkhorn", "emd", "greedy"])
+    p.add_argument(
+        "--solver",
+        default=docs["solver"][0],
+        choices=["sinkhorn", "emd", "greedy"],
+        help=f"OOPS coupling (default {docs['solver'][0]})",
+    )
     p.add_argument(
         "--metric",
         default=docs["metric"][0],
         choices=["sqrt_euclidean", "euclidean", "sqeuclidean", "cosine"],
+        help=f"OOPS ground cost (default {docs['metric'][0]})",
     )
-    p.add_argument("--atoms", default=docs["atoms"][0], choices=["transitions", "states"])
-    p.add_argument("--reg", type=float, default=docs["reg"][0], help="Sinkhorn lambda")
+    p.add_argument(
+        "--atoms",
+        default=docs["atoms"][0],
+        choices=["transitions", "states"],
+        help=f"OOPS atoms: (s, s') or s (default {docs['atoms'][0]})",
+    )
+    p.add_argument(
+        "--reg",
+        type=float,
+        default=docs["reg"][0],
+        help=f"Sinkhorn lambda (default {docs['reg'][0]})",
+    )
     p.add_argument("--json", action="store_true", help="one JSON line per episode")
     p.set_defaults(run=_run_reward)
 
@@ -415,8 +459,10 @@ def _add_demos_parser(sub: argparse._SubParsersAction) -> None:
     )
     k.add_argument("--expert", required=True, help="expert directory or env id")
     k.add_argument("--env", default=None, help="check that the expert is for this env")
-    k.add_argument("-n", "--episodes", type=int, default=10, help="episodes to collect")
-    k.add_argument("--seed", type=int, default=0, help="seed of the first episode")
+    k.add_argument(
+        "-n", "--episodes", type=int, default=10, help="episodes to collect (default 10)"
+    )
+    k.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
     k.add_argument("--out", required=True, help="ilfo .npz to write")
     k.add_argument(
         "--keep-falls",

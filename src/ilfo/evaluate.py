@@ -14,10 +14,13 @@ from ilfo.envs import make_env
 from ilfo.train import TrainConfig, Trainer, score_policy
 
 
-def evaluate_run(run_dir: Path, episodes: int = 10, video: str | None = None) -> dict[str, Any]:
+def evaluate_run(
+    run_dir: Path, episodes: int = 10, video: str | None = None, best: bool = False
+) -> dict[str, Any]:
     """Run deterministic fixed-horizon episodes of a run's policy and summarise them.
 
-    Uses ``policy.msgpack`` if the run finished, else its latest checkpoint.
+    Uses ``policy.msgpack`` if the run finished, else its latest checkpoint; with ``best``,
+    ``best_policy.msgpack`` (the best-evaluated policy so far).
     """
     run_dir = Path(run_dir)
     config_path = run_dir / "config.json"
@@ -27,7 +30,9 @@ def evaluate_run(run_dir: Path, episodes: int = 10, video: str | None = None) ->
         raise ValueError(f"--episodes must be >= 1, got {episodes}")
     config = TrainConfig(**json.loads(config_path.read_text()))
     trainer = Trainer(config, run_dir, progress=False)
-    policy = run_dir / "policy.msgpack"
+    policy = run_dir / ("best_policy.msgpack" if best else "policy.msgpack")
+    if best and not policy.is_file():
+        raise FileNotFoundError(f"{run_dir} has no best_policy.msgpack (no evaluation yet)")
     if policy.is_file():
         state = flax.serialization.from_bytes(policy_of(trainer.state), policy.read_bytes())
     else:
@@ -53,6 +58,7 @@ def evaluate_run(run_dir: Path, episodes: int = 10, video: str | None = None) ->
         "env": config.env,
         "algo": config.algo,
         "episodes": episodes,
+        "policy": policy.name if policy.is_file() else "latest checkpoint",
         "score_mean": float(np.mean(scored.scores)),
         "score_std": float(np.std(scored.scores)),
         "return_mean": float(np.mean(scored.returns)),

@@ -5,8 +5,9 @@ from them inside ``jax.lax.scan``, so nothing is copied from host to device per 
 
 Whole episodes are written at once (the training loop knows an episode's rewards only at its end),
 through one jitted scatter with donated buffers, so writing is in place and handles wrap-around.
-Rewards can be written later with ``relabel`` (the first random episodes get their rewards once
-the reward normalisers are fitted). ``save``/``load`` use ``.npz`` files without pickle.
+Rewards can also be written later with ``relabel``, for a loop that learns its reward after
+collecting (``ilfo train`` computes each episode's OT rewards before writing it, so it does
+not). ``save``/``load`` use ``.npz`` files without pickle.
 
 Conventions, for a buffer of capacity N:
 
@@ -145,8 +146,9 @@ class ReplayBuffer:
             observations: (T+1, obs_dim) s_0 .. s_T.
             actions: (T, action_dim) a_0 .. a_{T-1}.
             rewards: (T,) r_0 .. r_{T-1}, or None to write zeros and ``relabel`` later.
-            terminated: True if s_T is a true terminal state (its transition gets
-                ``not_done = 0``); False for a time-limit truncation or a fixed-horizon episode.
+            terminated: True to cut bootstrapping at s_T (its transition gets ``not_done = 0``):
+                a true termination, or the end of a fixed-horizon episode as the paper's code
+                does; False for a time-limit truncation in standard episodes.
         """
         obs = np.asarray(observations, dtype=np.float32)
         act = np.asarray(actions, dtype=np.float32)

@@ -6,11 +6,12 @@ episode at a time with the policy frozen; at the end of each episode its OT rewa
 and the episode enters the replay buffer, then as many updates run as steps were collected (one
 jitted call). Every ``eval_every`` steps, deterministic fixed-horizon episodes are scored.
 
-A run directory holds ``config.json``, ``metrics.csv``, ``checkpoints/``, ``policy.msgpack`` (the
-final agent) and ``learning_curve.png``. Checkpoints are taken at episode boundaries, where the
-whole state of the run is the agent state, the replay buffer, the rewarder's generator and a few
-counters; every other source of randomness is derived from (seed, episode index), so a resumed
-run reproduces the uninterrupted one exactly.
+A run directory holds ``config.json``, ``metrics.csv``, ``tb/`` (TensorBoard), ``checkpoints/``,
+``policy.msgpack`` (the final policy), ``best_policy.msgpack`` and ``best_policy.json`` (the
+best-evaluated policy, its step and score) and ``learning_curve.png``. Checkpoints are taken at
+episode boundaries, where the whole state of the run is the agent state, the replay buffer, the
+rewarder's generator and a few counters; every other source of randomness is derived from (seed,
+episode index), so a resumed run reproduces the uninterrupted one exactly.
 """
 
 from __future__ import annotations
@@ -83,7 +84,7 @@ class TrainConfig:
     """Rewarder + agent: oops-td3, oops-ddpg, oops-sac, pwil-td3, or td3 / sac on the true task
     reward (no demos)."""
     demos: str | None = None
-    """Demonstration file (.npz), or None for the env's shipped expert demos
+    """Demonstration file (.npz); omit it (None) for the env's shipped expert demos
     (data/experts/<env>/demos.npz)."""
     num_demos: int = 1
     """How many of the file's demos to imitate (the first N)."""

@@ -163,7 +163,8 @@ def ddpg_config(base: TD3Config | None = None, **overrides: Any) -> TD3Config:
     critic (no clipped double Q), no target policy smoothing, and actor/target updates at every
     step (policy_delay 1). Everything else (network sizes, loss, tau, noise, time augmentation)
     stays as in ``base``, so a DDPG run differs from its TD3 counterpart only in those three.
-    ``ddpg_config(TD3Config())`` is OurDDPG itself (256-256, MSE, tau 0.005, batch 256).
+    ``ddpg_config(TD3Config())`` is OurDDPG's algorithm (MSE, tau 0.005, batch 256) with TD3's
+    256-256 networks (OurDDPG's own are 400-300).
     """
     base = TD3Config.paper() if base is None else base
     cfg = dataclasses.replace(base, num_critics=1, target_noise=0.0, noise_clip=0.0, policy_delay=1)
