@@ -60,7 +60,9 @@ def test_export_load_collect_and_card(tiny_run, tmp_path):
 def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     run = tmp_path / "run"
     base = ["expert", "train", "Hopper-v5", "--run-dir", str(run), "--no-progress"]
-    assert main([*base, "--steps", "150"]) == 0
+    assert main([*base, "--steps", "150", "--eval-every", "100", "--eval-episodes", "1"]) == 0
+    config = json.loads((run / "config.json").read_text())
+    assert (config["eval_every"], config["eval_episodes"]) == (100, 1)
     assert main([*base, "--steps", "150"]) == 2  # exists: must say --resume
     assert "--resume" in capsys.readouterr().err
     assert main([*base, "--steps", "300", "--resume"]) == 0

@@ -192,15 +192,27 @@ def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
         help="SAC on the task reward, checkpointed and resumable in segments.",
         description=(
             "Train a SAC expert on the task reward in runs/experts/<ENV>__sac__<seed>/ (or "
-            "--run-dir). Standard episodes (termination handled), evaluated every 10,000 "
-            "steps on 10 episodes; the best-evaluated policy is what `ilfo expert export` "
-            "ships. Stop any time (Ctrl-C checkpoints) and continue with --resume, possibly "
-            "with a larger --steps."
+            "--run-dir). Standard episodes (termination handled), evaluated every --eval-every "
+            "steps on --eval-episodes deterministic episodes; the best-evaluated policy is what "
+            "`ilfo expert export` ships. Stop any time (Ctrl-C checkpoints) and continue with "
+            "--resume, possibly with a larger --steps."
         ),
     )
     t.add_argument("env", help="environment id, e.g. Hopper-v5")
     t.add_argument("--steps", type=int, default=None, help="total steps (default 1,000,000)")
     t.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    t.add_argument(
+        "--eval-every",
+        type=int,
+        default=10_000,
+        help="steps between evaluations (default 10,000; a resumed run keeps its own)",
+    )
+    t.add_argument(
+        "--eval-episodes",
+        type=int,
+        default=10,
+        help="episodes per evaluation (default 10; fewer for slow envs such as Minitaur)",
+    )
     t.add_argument("--resume", action="store_true", help="continue the existing run")
     t.add_argument("--run-dir", default=None, help="run directory (default: see above)")
     t.add_argument(
@@ -250,7 +262,8 @@ def _run_expert_train(args: argparse.Namespace) -> int:
             algo="sac",
             seed=args.seed,
             steps=args.steps or 1_000_000,
-            eval_every=10_000,
+            eval_every=args.eval_every,
+            eval_episodes=args.eval_episodes,
             checkpoint_every=args.checkpoint_every,
         )
         trainer = Trainer(config, run_dir, progress=not args.no_progress)
