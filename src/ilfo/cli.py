@@ -75,9 +75,8 @@ def _add_train_parser(sub: argparse._SubParsersAction) -> None:
             "Writes runs/<env>__<algo>__<seed>__<time>/ with config.json, metrics.csv, tb/ "
             "(TensorBoard), checkpoints/, policy.msgpack (the final policy), best_policy.msgpack "
             "and best_policy.json (the best-evaluated one) and learning_curve.png. Ctrl-C "
-            "checkpoints; "
-            "--resume RUN_DIR continues exactly where the run stopped. Every setting, the "
-            "agent's and the rewarder's included, is recorded in config.json."
+            "checkpoints; --resume RUN_DIR continues exactly where the run stopped. Every "
+            "setting, the agent's and the rewarder's included, is recorded in config.json."
         ),
     )
     add_dataclass_arguments(p, TrainConfig)

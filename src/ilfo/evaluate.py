@@ -28,11 +28,11 @@ def evaluate_run(
         raise FileNotFoundError(f"{run_dir} is not a run directory (no config.json)")
     if episodes < 1:
         raise ValueError(f"--episodes must be >= 1, got {episodes}")
-    config = TrainConfig(**json.loads(config_path.read_text()))
-    trainer = Trainer(config, run_dir, progress=False)
     policy = run_dir / ("best_policy.msgpack" if best else "policy.msgpack")
     if best and not policy.is_file():
         raise FileNotFoundError(f"{run_dir} has no best_policy.msgpack (no evaluation yet)")
+    config = TrainConfig(**json.loads(config_path.read_text()))
+    trainer = Trainer(config, run_dir, progress=False)
     if policy.is_file():
         state = flax.serialization.from_bytes(policy_of(trainer.state), policy.read_bytes())
     else:
