@@ -1,0 +1,13 @@
+"""Test-session setup."""
+
+import jax
+import pytest
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _compilation_cache(tmp_path_factory):
+    # Agents jit closures over their config, so every Trainer compiles its updates anew; a
+    # compilation cache shared by the session lets identical programs compile once.
+    jax.config.update("jax_compilation_cache_dir", str(tmp_path_factory.mktemp("jax_cache")))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
