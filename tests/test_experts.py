@@ -10,6 +10,7 @@ from ilfo.experts import (
     DEMOS_FILE,
     collect_demos,
     evaluate_expert,
+    expert_reward_scale,
     export_expert,
     load_expert,
     write_card,
@@ -39,6 +40,11 @@ def tiny_run(tmp_path_factory):
     run = tmp_path_factory.mktemp("runs") / "expert"
     Trainer(TINY_SAC, run, progress=False).train()
     return run
+
+
+def test_expert_reward_scales():
+    assert expert_reward_scale("MinitaurBulletEnv-v0") == 16.0  # tiny per-step rewards
+    assert expert_reward_scale("Hopper-v5") == 1.0
 
 
 def test_sac_resume_equals_uninterrupted(tiny_run, tmp_path):
@@ -77,11 +83,15 @@ def test_export_load_collect_and_card(tiny_run, tmp_path):
 def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     run = tmp_path / "run"
     base = ["expert", "train", "Hopper-v5", "--run-dir", str(run), "--no-progress"]
-    assert main([*base, "--steps", "150", "--eval-every", "100", "--eval-episodes", "1"]) == 0
+    first = ["--steps", "150", "--eval-every", "100", "--eval-episodes", "1", "--reward-scale", "2"]
+    assert main([*base, *first]) == 0
     config = json.loads((run / "config.json").read_text())
     assert (config["eval_every"], config["eval_episodes"]) == (100, 1)
+    assert config["sac"]["reward_scale"] == 2.0
     assert main([*base, "--steps", "150"]) == 2  # exists: must say --resume
     assert "--resume" in capsys.readouterr().err
+    assert main([*base, "--resume", "--reward-scale", "3"]) == 2
+    assert "--reward-scale cannot change on --resume" in capsys.readouterr().err
     assert main([*base, "--steps", "300", "--resume"]) == 0
     steps = [int(r.split(",")[0]) for r in (run / "metrics.csv").read_text().splitlines()[1:]]
     assert steps == sorted(steps) and steps[-1] >= 300

@@ -212,6 +212,13 @@ def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
         default=10,
         help="episodes per evaluation (default 10; fewer for slow envs such as Minitaur)",
     )
+    t.add_argument(
+        "--reward-scale",
+        type=float,
+        default=None,
+        help="SAC reward scale (default 16 for the Minitaur tasks, whose per-step rewards are "
+        "tiny, else 1; a resumed run keeps its own)",
+    )
     t.add_argument("--resume", action="store_true", help="continue the existing run")
     t.add_argument("--run-dir", default=None, help="run directory (default: see above)")
     t.add_argument(
@@ -248,17 +255,23 @@ def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _run_expert_train(args: argparse.Namespace) -> int:
+    from ilfo.agents import SACConfig
+    from ilfo.experts import expert_reward_scale
     from ilfo.train import TrainConfig, Trainer
 
     run_dir = Path(args.run_dir or Path("runs") / "experts" / f"{args.env}__sac__{args.seed}")
     if args.resume:
+        if args.reward_scale is not None:
+            raise ValueError("--reward-scale cannot change on --resume: the run keeps its own")
         trainer = Trainer.resume(run_dir, progress=not args.no_progress, steps=args.steps)
     else:
         if (run_dir / "config.json").exists():
             raise ValueError(f"{run_dir} exists: continue it with --resume, or pass --run-dir")
+        scale = expert_reward_scale(args.env) if args.reward_scale is None else args.reward_scale
         config = TrainConfig(
             env=args.env,
             algo="sac",
+            sac=SACConfig(reward_scale=scale),
             seed=args.seed,
             steps=args.steps or 1_000_000,
             eval_every=args.eval_every,

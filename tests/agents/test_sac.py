@@ -81,6 +81,20 @@ def test_update_deterministic_and_scan_equals_single_steps(buffer):
     assert int(a.step) == 3
 
 
+def test_reward_scale_equals_scaled_rewards(buffer):
+    scaled = make_sac(SACConfig(**TINY, reward_scale=4.0), OBS_DIM, ACT_DIM, MAX_ACTION)
+    plain = make_sac(SACConfig(**TINY), OBS_DIM, ACT_DIM, MAX_ACTION)
+    data4 = buffer.data._replace(reward=4.0 * buffer.data.reward)
+    a, _ = scaled.update(scaled.init(0), buffer.data, buffer.size, num_updates=3)
+    b, _ = plain.update(plain.init(0), data4, buffer.size, num_updates=3)
+    c, _ = plain.update(plain.init(0), buffer.data, buffer.size, num_updates=3)
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
+        np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-5, atol=1e-6)
+    assert not leaves_equal(a.critic_params, c.critic_params)
+    with pytest.raises(ValueError, match="reward_scale"):
+        SACConfig(reward_scale=0.0)
+
+
 def test_target_is_polyak_average(buffer):
     cfg = SACConfig(**TINY, tau=0.1)
     agent = make_sac(cfg, OBS_DIM, ACT_DIM, MAX_ACTION)

@@ -74,14 +74,25 @@ class SACConfig:
     """Target entropy of the action distribution; None = -action_dim."""
     critic_grad_clip: float | None = None
     """Clip the critics' global gradient norm to this value; None = no clipping."""
+    reward_scale: float = 1.0
+    """Rewards are multiplied by this in the critic's target (Haarnoja et al. 2018a, v1). It sets
+    the reward's weight against the entropy bonus: tasks whose per-step rewards are tiny (e.g.
+    Minitaur, ~0.01) learn little at 1."""
     log_std_min: float = -20.0
     """Lower clip of the actor's log std."""
     log_std_max: float = 2.0
     """Upper clip of the actor's log std."""
 
     def __post_init__(self) -> None:
-        if self.num_critics < 1 or self.batch_size < 1 or self.init_temperature <= 0:
-            raise ValueError("num_critics, batch_size and init_temperature must be positive")
+        if (
+            self.num_critics < 1
+            or self.batch_size < 1
+            or self.init_temperature <= 0
+            or self.reward_scale <= 0
+        ):
+            raise ValueError(
+                "num_critics, batch_size, init_temperature and reward_scale must be positive"
+            )
         object.__setattr__(self, "actor_hidden", tuple(self.actor_hidden))
         object.__setattr__(self, "critic_hidden", tuple(self.critic_hidden))
 
@@ -195,7 +206,9 @@ def make_sac(
         # Critic: soft TD target with the current policy at s'.
         next_action, next_logp = policy(state.actor_params, next_obs_n, k_next)
         next_q = jnp.min(critic.apply(state.critic_target, next_obs_n, next_action), axis=0)
-        target = batch.reward + cfg.gamma * batch.not_done * (next_q - temperature * next_logp)
+        target = cfg.reward_scale * batch.reward + cfg.gamma * batch.not_done * (
+            next_q - temperature * next_logp
+        )
         target = jax.lax.stop_gradient(target)
 
         def critic_loss_fn(params: Params) -> tuple[jax.Array, jax.Array]:
