@@ -95,6 +95,12 @@ def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     assert main([*base, "--steps", "300", "--resume"]) == 0
     steps = [int(r.split(",")[0]) for r in (run / "metrics.csv").read_text().splitlines()[1:]]
     assert steps == sorted(steps) and steps[-1] >= 300
+    assert json.loads((run / "config.json").read_text())["best_by"] == "return"
+    header, *rows = _metric_rows(run)
+    evals = [dict(zip(header, r, strict=True)) for r in rows if r[header.index("eval_return")]]
+    best = json.loads((run / "best_policy.json").read_text())
+    assert len(evals) >= 3
+    assert best["eval_return"] == max(float(r["eval_return"]) for r in evals)
     out = tmp_path / "expert"
     export = ["expert", "export", str(run), "--out", str(out), "-n", "1"]
     assert main(export) == 2  # a 300-step expert falls in every episode: no demo

@@ -192,9 +192,10 @@ def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
         description=(
             "Train a SAC expert on the task reward in runs/experts/<ENV>__sac__<seed>/ (or "
             "--run-dir). Standard episodes (termination handled), evaluated every --eval-every "
-            "steps on --eval-episodes deterministic episodes; the best-evaluated policy is what "
-            "`ilfo expert export` ships. Stop any time (Ctrl-C checkpoints) and continue with "
-            "--resume, possibly with a larger --steps."
+            "steps on --eval-episodes deterministic episodes; the policy of the best standard "
+            "return (which stops at the first fall) is what `ilfo expert export` ships. Stop "
+            "any time (Ctrl-C checkpoints) and continue with --resume, possibly with a larger "
+            "--steps."
         ),
     )
     t.add_argument("env", help="environment id, e.g. Hopper-v5")
@@ -272,6 +273,7 @@ def _run_expert_train(args: argparse.Namespace) -> int:
             env=args.env,
             algo="sac",
             sac=SACConfig(reward_scale=scale),
+            best_by="return",
             seed=args.seed,
             steps=args.steps or 1_000_000,
             eval_every=args.eval_every,

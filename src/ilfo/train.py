@@ -106,6 +106,10 @@ class TrainConfig:
     """Evaluate every this many environment steps."""
     eval_episodes: int = 10
     """Deterministic episodes per evaluation."""
+    best_by: Literal["score", "return"] = "score"
+    """Which evaluation picks best_policy.msgpack: ``score`` (the paper's fixed-horizon score)
+    or ``return`` (the standard return, which stops at the first fall: what an expert is judged
+    by; ``ilfo expert train`` uses it)."""
     checkpoint_every: int = 50_000
     """Checkpoint every this many environment steps (and on Ctrl-C)."""
     replay_capacity: int = 1_000_000
@@ -142,6 +146,8 @@ class TrainConfig:
                 )
         if self.preset not in ("paper", "fast"):
             raise ValueError(f"preset must be 'paper' or 'fast', got {self.preset!r}")
+        if self.best_by not in ("score", "return"):
+            raise ValueError(f"best_by must be 'score' or 'return', got {self.best_by!r}")
         for name in (
             "steps",
             "eval_every",
@@ -509,7 +515,8 @@ class Trainer:
         if self.step // cfg.eval_every > (self.step - num_steps) // cfg.eval_every:
             self.last_eval = self.evaluate()
             row.update(self.last_eval)
-            if self.last_eval["eval_score"] > self.best_eval.get("eval_score", -math.inf):
+            best_key = f"eval_{cfg.best_by}"
+            if self.last_eval[best_key] > self.best_eval.get(best_key, -math.inf):
                 self.best_eval = {"step": self.step, **self.last_eval}
                 self._save_policy(BEST_POLICY_FILE)
                 tmp = self.run_dir / f".{BEST_POLICY_INFO}.tmp"
