@@ -72,6 +72,8 @@ def test_export_load_collect_and_card(tiny_run, tmp_path):
     card = write_card(out)
     assert card["num_demos"] == 2 and card["steps_trained"] >= 400
     assert card["return_mean"] == pytest.approx(np.mean([e.task_score for e in episodes]))
+    assert card["paper_expert_return"] == 3420.0
+    assert card["fraction_of_paper_expert"] == pytest.approx(card["return_mean"] / 3420, abs=1e-3)
     assert set(card["sha256"]) == {"policy.msgpack", "expert.json", "demos.npz"}
     result = evaluate_expert(out, 2)
     assert result["episodes"] == 2 and np.isfinite(result["return_mean"])

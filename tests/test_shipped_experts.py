@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from ilfo import demos
-from ilfo.experts import evaluate_expert
+from ilfo.experts import PAPER_EXPERT_RETURNS, evaluate_expert
 from ilfo.paths import DATA_DIR
 
 SHIPPED = sorted(p for p in (DATA_DIR / "experts").glob("*") if (p / "card.json").is_file())
@@ -32,6 +32,10 @@ def test_checksums_and_demos_match_the_card(directory):
     returns = [e.task_score for e in data.episodes]
     assert np.mean(returns) == pytest.approx(card["return_mean"])
     assert [len(e.observations) - 1 for e in data.episodes] == card["demo_lengths"]
+    # How far the expert got against the paper's, as the issue asks each card to say.
+    assert card["paper_expert_return"] == PAPER_EXPERT_RETURNS[card["env_id"]]
+    fraction = card["return_mean"] / card["paper_expert_return"]
+    assert card["fraction_of_paper_expert"] == pytest.approx(fraction, abs=1e-3)
 
 
 @pytest.mark.parametrize("directory", SHIPPED, ids=lambda p: p.name)

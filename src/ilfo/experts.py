@@ -45,6 +45,19 @@ POLICY_FILE, EXPERT_FILE, DEMOS_FILE, CARD_FILE = (
 )
 
 
+PAPER_EXPERT_RETURNS: dict[str, float] = {
+    "Hopper-v5": 3420.0,
+    "Walker2d-v5": 4370.0,
+    "HalfCheetah-v5": 11340.0,
+    "Ant-v5": 5018.0,
+    "Humanoid-v5": 5973.0,
+    "BipedalWalker-v3": 318.9,
+    "MinitaurBulletEnv-v0": 12.36,
+    "MinitaurBulletDuckEnv-v0": 10.68,
+}
+"""The paper's experts' mean returns (its main results table, and the one of BipedalWalker and
+the Minitaur tasks), the targets of ilfo's experts; each card says how far its expert got."""
+
 EXPERT_REWARD_SCALES: dict[str, float] = {
     "MinitaurBulletEnv-v0": 16.0,
     "MinitaurBulletDuckEnv-v0": 16.0,
@@ -211,6 +224,16 @@ def collect_demos(
     return episodes
 
 
+def paper_comparison(env_id: str, return_mean: float) -> dict[str, Any]:
+    """Card fields comparing an expert's demo return with the paper's expert (None if the paper
+    had no expert for ``env_id``)."""
+    target = PAPER_EXPERT_RETURNS.get(env_id)
+    return {
+        "paper_expert_return": target,
+        "fraction_of_paper_expert": None if target is None else round(return_mean / target, 3),
+    }
+
+
 def write_card(directory: str | Path) -> dict[str, Any]:
     """Write ``card.json`` for an expert directory with policy, expert.json and demos."""
     directory = Path(directory)
@@ -229,6 +252,7 @@ def write_card(directory: str | Path) -> dict[str, Any]:
         "demo_lengths": [int(len(e.observations) - 1) for e in data.episodes],
         "return_mean": float(returns.mean()),
         "return_std": float(returns.std()),
+        **paper_comparison(cfg["env"], float(returns.mean())),
         "demo_seeds": data.provenance.get("seeds"),
         "demo_seeds_skipped_for_a_fall": data.provenance.get("skipped_seeds_with_a_fall", []),
         "sha256": {
