@@ -107,7 +107,11 @@ def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     export = ["expert", "export", str(run), "--out", str(out), "-n", "1"]
     assert main(export) == 2  # a 300-step expert falls in every episode: no demo
     assert "the expert fell in 3 of 3 episodes" in capsys.readouterr().err
+    assert not out.exists()  # all or nothing: no half-written expert directory
     assert main([*export, "--keep-falls"]) == 0
+    files = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert main(export) == 2  # fails again: the expert exported above stays as it was
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == files
     card = json.loads((out / "card.json").read_text())
     assert card["num_demos"] == 1 and card["demo_seeds"] == [0]
     capsys.readouterr()

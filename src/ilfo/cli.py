@@ -289,12 +289,11 @@ def _run_expert_train(args: argparse.Namespace) -> int:
 
 
 def _run_expert_export(args: argparse.Namespace) -> int:
-    from ilfo.experts import DEMOS_FILE, collect_demos, export_expert, load_expert, write_card
+    from ilfo.experts import export_expert_with_demos
 
-    out = export_expert(args.run_dir, args.out, which=args.which)
-    demos_path = out / DEMOS_FILE
-    collect_demos(load_expert(out), args.num_demos, demos_path, skip_falls=not args.keep_falls)
-    card = write_card(out)
+    out, card = export_expert_with_demos(
+        args.run_dir, args.out, args.which, args.num_demos, skip_falls=not args.keep_falls
+    )
     skipped = card["demo_seeds_skipped_for_a_fall"]
     print(
         f"wrote {out}: return {card['return_mean']:.1f} +- {card['return_std']:.1f} over "

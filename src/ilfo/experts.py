@@ -14,6 +14,8 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import os
+import shutil
 import time
 from pathlib import Path
 from typing import Any
@@ -131,6 +133,45 @@ def export_expert(
     }
     (out / EXPERT_FILE).write_text(json.dumps(record, indent=2) + "\n")
     return out
+
+
+def export_expert_with_demos(
+    run_dir: str | Path,
+    out_dir: str | Path | None,
+    which: str,
+    num_demos: int,
+    skip_falls: bool = True,
+) -> tuple[Path, dict[str, Any]]:
+    """Export, collect ``num_demos`` demos and write the card, all or nothing.
+
+    Everything is built in a temporary sibling directory that replaces ``out_dir`` (default
+    ``data/experts/<env>``) only once complete, so a failure (e.g. an expert that falls in
+    every episode) leaves a shipped expert as it was and no half-written one. Returns the
+    expert directory and its card.
+    """
+    run_dir = Path(run_dir)
+    if out_dir is None:
+        config_path = run_dir / "config.json"
+        if not config_path.is_file():
+            raise FileNotFoundError(f"{run_dir} is not a run directory (no config.json)")
+        out = expert_dir(json.loads(config_path.read_text())["env"])
+    else:
+        out = Path(out_dir)
+    staging = out.with_name(f".{out.name}.export-tmp")
+    shutil.rmtree(staging, ignore_errors=True)
+    try:
+        export_expert(run_dir, staging, which=which)
+        collect_demos(load_expert(staging), num_demos, staging / DEMOS_FILE, skip_falls=skip_falls)
+        card = write_card(staging)
+        old = out.with_name(f".{out.name}.export-old")
+        shutil.rmtree(old, ignore_errors=True)
+        if out.exists():
+            os.replace(out, old)
+        os.replace(staging, out)
+        shutil.rmtree(old, ignore_errors=True)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return out, card
 
 
 def load_expert(path: str | Path) -> ExpertPolicy:
