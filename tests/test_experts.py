@@ -15,7 +15,7 @@ from ilfo.experts import (
     load_expert,
     write_card,
 )
-from ilfo.train import TrainConfig, Trainer
+from ilfo.train import TrainConfig, Trainer, read_metrics
 
 TINY_SAC = TrainConfig(
     algo="sac",
@@ -30,9 +30,10 @@ TINY_SAC = TrainConfig(
 
 
 def _metric_rows(run):
-    rows = [line.split(",") for line in (run / "metrics.csv").read_text().splitlines()]
-    wall = {rows[0].index("wall_time"), rows[0].index("steps_per_s")}  # differ by nature
-    return [[v for i, v in enumerate(row) if i not in wall] for row in rows]
+    rows = read_metrics(run)
+    for row in rows:  # wall-clock columns differ between runs by nature
+        del row["wall_time"], row["steps_per_s"]
+    return rows
 
 
 @pytest.fixture(scope="module")
@@ -98,8 +99,7 @@ def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     steps = [int(r.split(",")[0]) for r in (run / "metrics.csv").read_text().splitlines()[1:]]
     assert steps == sorted(steps) and steps[-1] >= 300
     assert json.loads((run / "config.json").read_text())["best_by"] == "return"
-    header, *rows = _metric_rows(run)
-    evals = [dict(zip(header, r, strict=True)) for r in rows if r[header.index("eval_return")]]
+    evals = [r for r in _metric_rows(run) if r["eval_return"]]
     best = json.loads((run / "best_policy.json").read_text())
     assert len(evals) >= 3
     assert best["eval_return"] == max(float(r["eval_return"]) for r in evals)

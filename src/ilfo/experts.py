@@ -35,6 +35,7 @@ from ilfo.train import (
     TrainConfig,
     Trainer,
     make_agent,
+    read_run_config,
     rollout_policy,
     score_policy,
 )
@@ -150,13 +151,7 @@ def export_expert_with_demos(
     expert directory and its card.
     """
     run_dir = Path(run_dir)
-    if out_dir is None:
-        config_path = run_dir / "config.json"
-        if not config_path.is_file():
-            raise FileNotFoundError(f"{run_dir} is not a run directory (no config.json)")
-        out = expert_dir(json.loads(config_path.read_text())["env"])
-    else:
-        out = Path(out_dir)
+    out = Path(out_dir) if out_dir else expert_dir(read_run_config(run_dir)["env"])
     staging = out.with_name(f".{out.name}.export-tmp")
     shutil.rmtree(staging, ignore_errors=True)
     try:

@@ -640,7 +640,7 @@ class Trainer:
         logged again)."""
         run_dir = Path(run_dir)
         if steps is not None:
-            raw = _read_config(run_dir)
+            raw = read_run_config(run_dir)
             raw["steps"] = steps
             TrainConfig(**raw)  # validate before writing
             (run_dir / "config.json").write_text(json.dumps(raw, indent=2) + "\n")
@@ -654,7 +654,7 @@ class Trainer:
     ) -> Trainer:
         """A trainer in the state of the run's last checkpoint; changes no file."""
         run_dir = Path(run_dir)
-        trainer = cls(TrainConfig(**_read_config(run_dir)), run_dir, progress=progress)
+        trainer = cls(TrainConfig(**read_run_config(run_dir)), run_dir, progress=progress)
         latest = run_dir / "checkpoints" / "latest"
         if not latest.is_file():
             raise FileNotFoundError(f"{run_dir} has no checkpoint to resume from")
@@ -759,7 +759,8 @@ def score_policy(
     return PolicyScores(np.array(scores), np.array(returns), np.array(distances), frames)
 
 
-def _read_config(run_dir: Path) -> dict[str, Any]:
+def read_run_config(run_dir: Path) -> dict[str, Any]:
+    """A run directory's config.json as a dict (a clear error if it is not a run directory)."""
     path = run_dir / "config.json"
     if not path.is_file():
         raise FileNotFoundError(f"{run_dir} is not a run directory (no config.json)")
