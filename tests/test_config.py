@@ -85,6 +85,7 @@ def _round_trip(config: TrainConfig) -> TrainConfig:
         TrainConfig(algo="pwil-td3", pwil=PWILConfig(alpha=2.0, horizon=500)),
         TrainConfig(algo="oops-ddpg", horizon=100).resolved(100),
         TrainConfig(algo="sac", fixed_horizon=True).resolved(1000),
+        TrainConfig(algo="sac", healthy_angle_range=(-0.1, 0.1)),
     ],
 )
 def test_train_config_survives_a_json_round_trip(config):
@@ -94,6 +95,18 @@ def test_train_config_survives_a_json_round_trip(config):
         assert type(getattr(again, name)) is type(getattr(config, name))
     if config.td3 is not None:
         assert isinstance(again.td3.critic_hidden, tuple)
+
+
+def test_float_pair_flag_and_its_validation():
+    parser = argparse.ArgumentParser()
+    add_dataclass_arguments(parser, TrainConfig)
+    args = parser.parse_args(["--healthy-angle-range", "-0.1", "0.15"])
+    assert overrides_from_args(args, TrainConfig) == {"healthy_angle_range": (-0.1, 0.15)}
+    with pytest.raises(SystemExit):  # two numbers, not one
+        parser.parse_args(["--healthy-angle-range", "0.1"])
+    for bad in ((0.1, -0.1), (0.0, 0.0), (0.1,)):
+        with pytest.raises(ValueError, match="healthy_angle_range"):
+            TrainConfig(healthy_angle_range=bad)
 
 
 def test_resolved_config_builds_the_same_agent_and_rewarder():

@@ -41,6 +41,17 @@ def test_episode_scores():
     assert episode_scores(rewards, np.zeros(4, bool)) == (10.0, 10.0)
 
 
+def test_healthy_angle_range_makes_falls_stricter():
+    default = make_env("Hopper-v5", False, horizon=300)
+    strict = make_env("Hopper-v5", False, horizon=300, healthy_angle_range=(-0.05, 0.05))
+    assert strict.unwrapped._healthy_angle_range == (-0.05, 0.05)
+    assert _run(strict, 0)[0] < _run(default, 0)[0]  # same actions, an earlier fall
+    with pytest.raises(ValueError, match="not HalfCheetah"):
+        make_env("HalfCheetah-v5", healthy_angle_range=(-0.1, 0.1))
+    with pytest.raises(ValueError, match="low < high"):
+        make_env("Hopper-v5", healthy_angle_range=(0.1, -0.1))
+
+
 def test_unknown_env_is_a_clear_error():
     with pytest.raises(ValueError, match="unknown environment"):
         make_env("NoSuchEnv-v0")

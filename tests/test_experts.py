@@ -93,14 +93,17 @@ def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     run = tmp_path / "run"
     base = ["expert", "train", "Hopper-v5", "--run-dir", str(run), "--no-progress"]
     first = ["--steps", "150", "--eval-every", "100", "--eval-episodes", "1", "--reward-scale", "2"]
-    assert main([*base, *first]) == 0
+    assert main([*base, *first, "--healthy-angle-range", "-0.15", "0.15"]) == 0
     config = json.loads((run / "config.json").read_text())
     assert (config["eval_every"], config["eval_episodes"]) == (100, 1)
     assert config["sac"]["reward_scale"] == 2.0
+    assert config["healthy_angle_range"] == [-0.15, 0.15]
     assert main([*base, "--steps", "150"]) == 2  # exists: must say --resume
     assert "--resume" in capsys.readouterr().err
     assert main([*base, "--resume", "--reward-scale", "3"]) == 2
     assert "--reward-scale cannot change on --resume" in capsys.readouterr().err
+    assert main([*base, "--resume", "--healthy-angle-range", "-0.2", "0.2"]) == 2
+    assert "--healthy-angle-range cannot change on --resume" in capsys.readouterr().err
     assert main([*base, "--steps", "300", "--resume"]) == 0
     steps = [int(r.split(",")[0]) for r in (run / "metrics.csv").read_text().splitlines()[1:]]
     assert steps == sorted(steps) and steps[-1] >= 300
@@ -122,6 +125,7 @@ def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     card = json.loads((out / "card.json").read_text())
     assert card["num_demos"] == 1 and card["demo_seeds"] == [0]
     assert card["note"] == "falls: the best reached" and card["demo_seeds_with_a_fall"] == [0]
+    assert card["trained_healthy_angle_range"] == [-0.15, 0.15]
     capsys.readouterr()
     assert main(["expert", "eval", str(out), "--episodes", "1", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["episodes"] == 1

@@ -42,6 +42,9 @@ def test_checksums_and_demos_match_the_card(directory):
     for seed in card["demo_seeds_with_a_fall"]:
         assert data.episodes[seeds.index(seed)].terminated.any(), seed
     assert card["eval_episodes"] >= 10 and card["eval_first_seed"] > max(seeds)
+    record = json.loads((directory / "expert.json").read_text())
+    trained_range = record["train_config"].get("healthy_angle_range")
+    assert card["trained_healthy_angle_range"] == trained_range
     assert np.isfinite([card["eval_return_mean"], card["eval_return_std"]]).all()
     # An expert well short of the paper's, or with falls in its demos, says why it is shipped.
     if card["fraction_of_paper_expert"] < 0.9 or card["demo_seeds_with_a_fall"]:

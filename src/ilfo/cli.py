@@ -236,6 +236,16 @@ def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
         help="SAC reward scale (default 16 for the Minitaur tasks, whose per-step rewards are "
         "tiny, else 1; a resumed run keeps its own)",
     )
+    t.add_argument(
+        "--healthy-angle-range",
+        type=float,
+        nargs=2,
+        metavar=("LOW", "HIGH"),
+        default=None,
+        help="train with a stricter torso angle range (radians; Hopper, Walker2d): the expert "
+        "learns to keep a margin from a fall; demos are still recorded in the standard env "
+        "(default: the env's own range; a resumed run keeps its own)",
+    )
     t.add_argument("--resume", action="store_true", help="continue the existing run")
     t.add_argument("--run-dir", default=None, help="run directory (default: see above)")
     t.add_argument(
@@ -285,6 +295,10 @@ def _run_expert_train(args: argparse.Namespace) -> int:
     if args.resume:
         if args.reward_scale is not None:
             raise ValueError("--reward-scale cannot change on --resume: the run keeps its own")
+        if args.healthy_angle_range is not None:
+            raise ValueError(
+                "--healthy-angle-range cannot change on --resume: the run keeps its own"
+            )
         trainer = Trainer.resume(run_dir, progress=not args.no_progress, steps=args.steps)
     else:
         if (run_dir / "config.json").exists():
@@ -295,6 +309,7 @@ def _run_expert_train(args: argparse.Namespace) -> int:
             algo="sac",
             sac=SACConfig(reward_scale=scale),
             best_by="return",
+            healthy_angle_range=args.healthy_angle_range and tuple(args.healthy_angle_range),
             seed=args.seed,
             steps=args.steps or 1_000_000,
             eval_every=args.eval_every,

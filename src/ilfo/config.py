@@ -77,7 +77,8 @@ def add_dataclass_arguments(
     With ``prefix`` "td3", field ``batch_size`` becomes ``--td3-batch-size`` (dest
     ``td3_batch_size``). A flag that is not given leaves no attribute in the namespace
     (``overrides_from_args`` reads only the given ones), so optional numbers can be set to None
-    with the word ``none``. Tuples take one or more ints; booleans get ``--no-`` twins. Fields
+    with the word ``none``. Tuples take their items (``tuple[int, ...]``: one or more ints;
+    ``tuple[float, float]``: two floats); booleans get ``--no-`` twins. Fields
     in ``skip``, and fields that are dataclasses themselves (give them their own group), get no
     flag. ``defaults`` overrides the default shown in the help, per field (e.g. a preset's).
     """
@@ -103,9 +104,10 @@ def add_dataclass_arguments(
         elif choices:
             kwargs["choices"] = choices
         elif base is tuple:
-            kwargs["type"] = int
-            kwargs["nargs"] = "+"
-            kwargs["metavar"] = "INT"
+            item, count = _tuple_items(hint)
+            kwargs["type"] = item
+            kwargs["nargs"] = count
+            kwargs["metavar"] = item.__name__.upper()
         elif base in (int, float) and _optional(hint):
             kwargs["type"] = none_or(base)
             kwargs["metavar"] = f"{base.__name__.upper()}|none"
@@ -160,6 +162,16 @@ def _literal_choices(hint: Any) -> list[Any] | None:
     if get_origin(hint) is Literal:
         return list(get_args(hint))
     return None
+
+
+def _tuple_items(hint: Any) -> tuple[type, int | str]:
+    """Item type and argparse ``nargs`` of a (possibly optional) tuple hint."""
+    if get_origin(hint) in (typing.Union, types.UnionType):
+        hint = next(a for a in get_args(hint) if a is not type(None))
+    args = get_args(hint)
+    if len(args) == 2 and args[1] is Ellipsis:
+        return args[0], "+"
+    return args[0], len(args)
 
 
 def _base_type(hint: Any) -> Any:

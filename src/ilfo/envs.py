@@ -32,6 +32,10 @@ SUPPORTED_ENVS: tuple[str, ...] = (
 )
 
 
+HEALTHY_ANGLE_ENVS: tuple[str, ...] = ("Hopper-v5", "Walker2d-v5")
+"""Envs whose torso must stay in a healthy angle range (``make_env``'s ``healthy_angle_range``)."""
+
+
 class IgnoreTermination(gym.Wrapper):
     """Turns ``terminated`` into ``info["env_terminated"] = True`` so the episode goes on."""
 
@@ -48,6 +52,7 @@ def make_env(
     seed: int | None = None,
     horizon: int | None = None,
     render_mode: str | None = None,
+    healthy_angle_range: tuple[float, float] | None = None,
 ) -> gym.Env:
     """Make a gymnasium environment.
 
@@ -58,12 +63,17 @@ def make_env(
         horizon: Episode length; the environment's registered limit if None (1,000 for MuJoCo
             and Minitaur).
         render_mode: Passed to gymnasium (e.g. ``rgb_array`` for videos).
+        healthy_angle_range: (low, high) torso angle in radians outside which Hopper or
+            Walker2d is unhealthy (a fall: termination, no healthy reward); None: the env's
+            own, (-0.2, 0.2) for Hopper-v5, (-1, 1) for Walker2d-v5. A stricter range trains
+            experts that keep a margin from a fall (docs/experts.md).
 
     Returns:
         The environment, with ``env.spec.max_episode_steps`` equal to the horizon.
 
     Raises:
-        ValueError: Unknown ``env_id``, or a gymnasium optional dependency is missing.
+        ValueError: Unknown ``env_id``, a gymnasium optional dependency is missing, or a
+            ``healthy_angle_range`` that is not (low < high) or for an env without one.
         ImportError: A Minitaur id without PyBullet (``pip install -e ".[bullet]"``).
     """
     try:
@@ -73,8 +83,18 @@ def make_env(
     limit = horizon or spec.max_episode_steps or 1000
     if limit < 1:
         raise ValueError(f"horizon must be >= 1, got {horizon}")
+    kwargs: dict[str, Any] = {}
+    if healthy_angle_range is not None:
+        if env_id not in HEALTHY_ANGLE_ENVS:
+            raise ValueError(
+                f"healthy_angle_range applies to {', '.join(HEALTHY_ANGLE_ENVS)}, not {env_id}"
+            )
+        low, high = (float(v) for v in healthy_angle_range)
+        if not low < high:
+            raise ValueError(f"healthy_angle_range needs low < high, got {healthy_angle_range}")
+        kwargs["healthy_angle_range"] = (low, high)
     try:
-        env = gym.make(env_id, max_episode_steps=limit, render_mode=render_mode)
+        env = gym.make(env_id, max_episode_steps=limit, render_mode=render_mode, **kwargs)
     except gym.error.DependencyNotInstalled as err:
         raise ValueError(f"{env_id} needs an optional dependency: {err}") from err
     if fixed_horizon:

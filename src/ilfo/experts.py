@@ -302,6 +302,9 @@ def write_card(
         "steps_trained": record["steps_trained"],
         "hours_trained": record.get("hours_trained"),
         "seed": cfg["seed"],
+        # A stricter torso angle range than the env's during training (ilfo expert train
+        # --healthy-angle-range); demos and evaluations use the env's own range.
+        "trained_healthy_angle_range": cfg.get("healthy_angle_range"),
         "date": time.strftime("%Y-%m-%d"),
         "num_demos": len(data.episodes),
         "demo_lengths": [int(len(e.observations) - 1) for e in data.episodes],

@@ -103,6 +103,11 @@ class TrainConfig:
     imitation, off for true-reward algos."""
     horizon: int | None = None
     """Episode length; None: the environment's limit (1,000 for MuJoCo)."""
+    healthy_angle_range: tuple[float, float] | None = None
+    """Torso angle range (radians) outside which Hopper or Walker2d counts as fallen, in this
+    run's training and evaluation episodes; None: the env's own ((-0.2, 0.2) for Hopper).
+    Stricter ranges train experts with a margin from a fall; demos and the paper's scores always
+    use the env's own range."""
     eval_every: int = 5_000
     """Evaluate every this many environment steps."""
     eval_episodes: int = 10
@@ -161,6 +166,14 @@ class TrainConfig:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.start_steps < 0:
             raise ValueError(f"start_steps must be >= 0, got {self.start_steps}")
+        if self.healthy_angle_range is not None:  # a list, as read back from config.json
+            angles = tuple(float(v) for v in self.healthy_angle_range)
+            if len(angles) != 2 or not angles[0] < angles[1]:
+                raise ValueError(
+                    f"healthy_angle_range must be (low, high) with low < high, "
+                    f"got {self.healthy_angle_range}"
+                )
+            object.__setattr__(self, "healthy_angle_range", angles)
 
     @property
     def imitation(self) -> bool:
@@ -367,9 +380,15 @@ class Trainer:
         self.progress = progress
         self.resume_command = f"ilfo train --resume {self.run_dir}"
         """What the interrupt message tells the user to run to continue (the CLI may change it)."""
-        self.env = make_env(config.env, config.uses_fixed_horizon, horizon=config.horizon)
+        angles = config.healthy_angle_range
+        self.env = make_env(
+            config.env,
+            config.uses_fixed_horizon,
+            horizon=config.horizon,
+            healthy_angle_range=angles,
+        )
         self.horizon = int(self.env.spec.max_episode_steps)
-        self.eval_env = make_env(config.env, True, horizon=self.horizon)
+        self.eval_env = make_env(config.env, True, horizon=self.horizon, healthy_angle_range=angles)
         obs_space, act_space = self.env.observation_space, self.env.action_space
         self.obs_dim = int(np.prod(obs_space.shape))
         self.action_dim = int(np.prod(act_space.shape))
