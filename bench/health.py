@@ -1,0 +1,126 @@
+"""Where a Hopper or Walker2d policy loses the paper's score: which health condition fails.
+
+The paper's fixed-horizon score zeroes the task reward of every step on which the environment
+calls the robot unhealthy (torso too low, torso angle out of range, a state out of range). This
+script rolls out a run's policy (or a shipped expert) deterministically and counts, per
+episode, the unhealthy steps and which condition made them so, beside the torso angle the
+demos hold: a learner can lose much of its score to a lean it never falls from.
+
+    python bench/health.py RUN_DIR [--best] [--episodes 5] [--json]
+    python bench/health.py --expert Hopper-v5
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+# Keep this folder off the path: bench/ot.py would shadow POT's `ot`.
+sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
+from ilfo import demos as demo_io
+from ilfo.benchmarking import machine
+from ilfo.envs import HEALTHY_ANGLE_ENVS, episode_scores, make_env
+from ilfo.experts import load_expert
+from ilfo.train import BEST_POLICY_FILE, Trainer, default_demos_path, rollout_policy
+
+
+def health_report(env_id: str, observations: np.ndarray) -> dict[str, float]:
+    """Counts of unhealthy states by condition, from the env's own health ranges (gymnasium
+    v5 Hopper and Walker2d: observation 0 is the torso height, 1 its angle)."""
+    env = make_env(env_id).unwrapped
+    z, angle = observations[:, 0], observations[:, 1]
+    z_low, z_high = env._healthy_z_range
+    a_low, a_high = env._healthy_angle_range
+    return {
+        "z_out": int(np.sum((z <= z_low) | (z >= z_high))),
+        "angle_out": int(np.sum((angle <= a_low) | (angle >= a_high))),
+        "angle_mean": float(angle.mean()),
+        "angle_min": float(angle.min()),
+        "angle_max": float(angle.max()),
+        "x_velocity_mean": float(observations[:, 5].mean()),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("run_dir", nargs="?", help="an `ilfo train` run directory")
+    parser.add_argument("--expert", default=None, help="a shipped expert's env id (or directory)")
+    parser.add_argument("--best", action="store_true", help="the run's best policy, not its last")
+    parser.add_argument("--episodes", type=int, default=5)
+    parser.add_argument("--first-seed", type=int, default=10_000)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    if (args.run_dir is None) == (args.expert is None):
+        parser.error("give a run directory or --expert, not both")
+
+    if args.expert:
+        expert = load_expert(args.expert)
+        env_id, label = expert.config.env, f"expert {args.expert}"
+        rollout = expert.rollout
+        demo_path = default_demos_path(env_id)
+    else:
+        trainer = Trainer.from_checkpoint(args.run_dir, progress=False, with_replay=False)
+        state = trainer.state
+        if args.best:
+            import flax.serialization
+
+            from ilfo.agents import policy_of
+
+            best = (Path(args.run_dir) / BEST_POLICY_FILE).read_bytes()
+            state = flax.serialization.from_bytes(policy_of(state), best)
+        env_id, label = trainer.config.env, f"{args.run_dir} at step {trainer.step}"
+        env = make_env(env_id, True, horizon=trainer.horizon)
+
+        def rollout(seed: int):
+            return rollout_policy(env, trainer.agent, state, trainer.horizon, seed=seed)
+
+        demo_path = Path(trainer.config.demos or default_demos_path(env_id))
+    if env_id not in HEALTHY_ANGLE_ENVS:
+        raise SystemExit(f"{env_id}: only {', '.join(HEALTHY_ANGLE_ENVS)} have these conditions")
+
+    demo = demo_io.load(demo_path).episodes[0].observations
+    rows = []
+    for k in range(args.episodes):
+        r = rollout(args.first_seed + k)
+        score, standard = episode_scores(r.rewards, r.env_terminated)
+        first = int(np.argmax(r.env_terminated)) if r.env_terminated.any() else None
+        rows.append(
+            {
+                "seed": args.first_seed + k,
+                "score": float(score),
+                "standard_return": float(standard),
+                "unhealthy_steps": int(r.env_terminated.sum()),
+                "first_unhealthy_step": first,
+                **health_report(env_id, r.observations[1:]),
+            }
+        )
+    demo_row = health_report(env_id, demo[1:])
+    meta = {"bench": "health", "machine": machine(), "env": env_id, "policy": label}
+    if args.json:
+        for row in rows:
+            print(json.dumps({**meta, **row}))
+        print(json.dumps({**meta, "demo": str(demo_path), **demo_row}))
+        return
+    print(f"{label} ({env_id}), {args.episodes} deterministic fixed-horizon episodes")
+    print("seed  score  standard  unhealthy  first  z_out  angle_out  angle mean [min, max]  x-vel")
+    for r in rows:
+        print(
+            f"{r['seed']}  {r['score']:6.0f}  {r['standard_return']:8.0f}  "
+            f"{r['unhealthy_steps']:9d}  {r['first_unhealthy_step']!s:>5}  {r['z_out']:5d}  "
+            f"{r['angle_out']:9d}  {r['angle_mean']:+.3f} [{r['angle_min']:+.3f}, "
+            f"{r['angle_max']:+.3f}]  {r['x_velocity_mean']:.2f}"
+        )
+    d = demo_row
+    print(
+        f"demo 0 of {demo_path}: angle mean {d['angle_mean']:+.3f} [{d['angle_min']:+.3f}, "
+        f"{d['angle_max']:+.3f}], x-vel {d['x_velocity_mean']:.2f}, "
+        f"angle_out {d['angle_out']}, z_out {d['z_out']}"
+    )
+
+
+if __name__ == "__main__":
+    main()
