@@ -61,7 +61,8 @@ def main() -> None:
         expert = load_expert(args.expert)
         env_id, label = expert.config.env, f"expert {args.expert}"
         rollout = expert.rollout
-        demo_path = default_demos_path(env_id)
+        own_demos = Path(args.expert) / "demos.npz"
+        demo_path = own_demos if own_demos.is_file() else default_demos_path(env_id)
     else:
         trainer = Trainer.from_checkpoint(args.run_dir, progress=False, with_replay=False)
         state = trainer.state
