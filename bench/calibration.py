@@ -48,12 +48,18 @@ def rollout(env, act, horizon: int, seed: int) -> tuple[np.ndarray, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--env", default="Hopper-v5", help="an env with a shipped expert")
+    parser.add_argument(
+        "--expert", default=None, help="an expert directory (default: the env's shipped one)"
+    )
     parser.add_argument("--episodes", type=int, default=3, help="episodes per policy")
     parser.add_argument("--json", action="store_true", help="one JSON line per policy")
     args = parser.parse_args()
 
-    expert = load_expert(args.env)
-    demo = demos.load(expert_dir(args.env) / "demos.npz").episodes[0].observations
+    directory = Path(args.expert) if args.expert else expert_dir(args.env)
+    expert = load_expert(directory)
+    if expert.config.env != args.env:
+        parser.error(f"{directory} is an expert for {expert.config.env}: pass --env too")
+    demo = demos.load(directory / "demos.npz").episodes[0].observations
     rewarder = OOPS([demo])
     env = make_env(args.env, fixed_horizon=True, horizon=expert.horizon)
     low, high = env.action_space.low, env.action_space.high
