@@ -73,7 +73,11 @@ def main() -> None:
 
             best = (Path(args.run_dir) / BEST_POLICY_FILE).read_bytes()
             state = flax.serialization.from_bytes(policy_of(state), best)
-        env_id, label = trainer.config.env, f"{args.run_dir} at step {trainer.step}"
+            info = json.loads((Path(args.run_dir) / "best_policy.json").read_text())
+            label = f"{args.run_dir}, best policy (step {info['step']})"
+        else:
+            label = f"{args.run_dir} at step {trainer.step}"
+        env_id = trainer.config.env
         env = make_env(env_id, True, horizon=trainer.horizon)
 
         def rollout(seed: int):
