@@ -16,6 +16,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -24,17 +25,17 @@ sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).re
 from ilfo import demos as demo_io
 from ilfo.benchmarking import machine
 from ilfo.envs import HEALTHY_ANGLE_ENVS, episode_scores, make_env
+from ilfo.evaluate import load_run_policy
 from ilfo.experts import load_expert
-from ilfo.train import BEST_POLICY_FILE, Trainer, default_demos_path, rollout_policy
+from ilfo.train import default_demos_path, rollout_policy
 
 
-def health_report(env_id: str, observations: np.ndarray) -> dict[str, float]:
-    """Counts of unhealthy states by condition, from the env's own health ranges (gymnasium
+def health_report(env: Any, observations: np.ndarray) -> dict[str, float]:
+    """Counts of unhealthy states by condition, from ``env``'s own health ranges (gymnasium
     v5 Hopper and Walker2d: observation 0 is the torso height, 1 its angle)."""
-    env = make_env(env_id).unwrapped
     z, angle = observations[:, 0], observations[:, 1]
-    z_low, z_high = env._healthy_z_range
-    a_low, a_high = env._healthy_angle_range
+    z_low, z_high = env.unwrapped._healthy_z_range
+    a_low, a_high = env.unwrapped._healthy_angle_range
     return {
         "z_out": int(np.sum((z <= z_low) | (z >= z_high))),
         "angle_out": int(np.sum((angle <= a_low) | (angle >= a_high))),
@@ -64,29 +65,22 @@ def main() -> None:
         own_demos = Path(args.expert) / "demos.npz"
         demo_path = own_demos if own_demos.is_file() else default_demos_path(env_id)
     else:
-        trainer = Trainer.from_checkpoint(args.run_dir, progress=False, with_replay=False)
-        state = trainer.state
+        trainer, state, which = load_run_policy(Path(args.run_dir), args.best)
         if args.best:
-            import flax.serialization
-
-            from ilfo.agents import policy_of
-
-            best = (Path(args.run_dir) / BEST_POLICY_FILE).read_bytes()
-            state = flax.serialization.from_bytes(policy_of(state), best)
             info = json.loads((Path(args.run_dir) / "best_policy.json").read_text())
-            label = f"{args.run_dir}, best policy (step {info['step']})"
-        else:
-            label = f"{args.run_dir} at step {trainer.step}"
-        env_id = trainer.config.env
-        env = make_env(env_id, True, horizon=trainer.horizon)
+            which += f" (step {info['step']})"
+        env_id, label = trainer.config.env, f"{args.run_dir}, {which}"
+        # The env's own health ranges: the paper's score, whatever the run trained with.
+        run_env = make_env(env_id, True, horizon=trainer.horizon)
 
         def rollout(seed: int):
-            return rollout_policy(env, trainer.agent, state, trainer.horizon, seed=seed)
+            return rollout_policy(run_env, trainer.agent, state, trainer.horizon, seed=seed)
 
         demo_path = Path(trainer.config.demos or default_demos_path(env_id))
     if env_id not in HEALTHY_ANGLE_ENVS:
         raise SystemExit(f"{env_id}: only {', '.join(HEALTHY_ANGLE_ENVS)} have these conditions")
 
+    env = make_env(env_id)
     demo = demo_io.load(demo_path).episodes[0].observations
     rows = []
     for k in range(args.episodes):
@@ -100,10 +94,10 @@ def main() -> None:
                 "standard_return": float(standard),
                 "unhealthy_steps": int(r.env_terminated.sum()),
                 "first_unhealthy_step": first,
-                **health_report(env_id, r.observations[1:]),
+                **health_report(env, r.observations[1:]),
             }
         )
-    demo_row = health_report(env_id, demo[1:])
+    demo_row = health_report(env, demo[1:])
     meta = {"bench": "health", "machine": machine(), "env": env_id, "policy": label}
     if args.json:
         for row in rows:

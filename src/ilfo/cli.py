@@ -309,7 +309,7 @@ def _run_expert_train(args: argparse.Namespace) -> int:
             algo="sac",
             sac=SACConfig(reward_scale=scale),
             best_by="return",
-            healthy_angle_range=args.healthy_angle_range and tuple(args.healthy_angle_range),
+            healthy_angle_range=args.healthy_angle_range,  # a list: TrainConfig makes it a tuple
             seed=args.seed,
             steps=args.steps or 1_000_000,
             eval_every=args.eval_every,

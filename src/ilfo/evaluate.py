@@ -14,20 +14,15 @@ from ilfo.envs import make_env
 from ilfo.train import TrainConfig, Trainer, score_policy
 
 
-def evaluate_run(
-    run_dir: Path, episodes: int = 10, video: str | None = None, best: bool = False
-) -> dict[str, Any]:
-    """Run deterministic fixed-horizon episodes of a run's policy and summarise them.
-
-    Uses ``policy.msgpack`` if the run finished, else its latest checkpoint; with ``best``,
-    ``best_policy.msgpack`` (the best-evaluated policy so far).
-    """
+def load_run_policy(run_dir: Path, best: bool = False) -> tuple[Trainer, Any, str]:
+    """A run's trainer (its config, environments and agent, fresh) and the policy to evaluate:
+    ``policy.msgpack`` if the run finished, else its latest checkpoint's; with ``best``,
+    ``best_policy.msgpack`` (the best-evaluated policy so far). Returns (trainer, policy,
+    which): ``which`` names the policy used."""
     run_dir = Path(run_dir)
     config_path = run_dir / "config.json"
     if not config_path.is_file():
         raise FileNotFoundError(f"{run_dir} is not a run directory (no config.json)")
-    if episodes < 1:
-        raise ValueError(f"--episodes must be >= 1, got {episodes}")
     policy = run_dir / ("best_policy.msgpack" if best else "policy.msgpack")
     if best and not policy.is_file():
         raise FileNotFoundError(f"{run_dir} has no best_policy.msgpack (no evaluation yet)")
@@ -35,15 +30,35 @@ def evaluate_run(
     trainer = Trainer(config, run_dir, progress=False)
     if policy.is_file():
         state = flax.serialization.from_bytes(policy_of(trainer.state), policy.read_bytes())
-    else:
-        latest = run_dir / "checkpoints" / "latest"
-        if not latest.is_file():
-            raise FileNotFoundError(f"{run_dir} has neither policy.msgpack nor a checkpoint")
-        ckpt = run_dir / "checkpoints" / latest.read_text().strip() / "agent.msgpack"
-        state = flax.serialization.from_bytes(trainer.state, ckpt.read_bytes())
+        return trainer, state, policy.name
+    latest = run_dir / "checkpoints" / "latest"
+    if not latest.is_file():
+        raise FileNotFoundError(f"{run_dir} has neither policy.msgpack nor a checkpoint")
+    ckpt = run_dir / "checkpoints" / latest.read_text().strip() / "agent.msgpack"
+    state = flax.serialization.from_bytes(trainer.state, ckpt.read_bytes())
+    return trainer, state, "latest checkpoint"
+
+
+def evaluate_run(
+    run_dir: Path, episodes: int = 10, video: str | None = None, best: bool = False
+) -> dict[str, Any]:
+    """Run deterministic fixed-horizon episodes of a run's policy and summarise them.
+
+    The policy: see ``load_run_policy``.
+    """
+    if episodes < 1:
+        raise ValueError(f"--episodes must be >= 1, got {episodes}")
+    trainer, state, which = load_run_policy(run_dir, best)
+    config = trainer.config
     env = trainer.eval_env
     if video:
-        env = make_env(config.env, True, horizon=trainer.horizon, render_mode="rgb_array")
+        env = make_env(
+            config.env,
+            True,
+            horizon=trainer.horizon,
+            render_mode="rgb_array",
+            healthy_angle_range=config.healthy_angle_range,  # as trainer.eval_env
+        )
         _check_rendering(env)
     scored = score_policy(
         env,
@@ -58,7 +73,7 @@ def evaluate_run(
         "env": config.env,
         "algo": config.algo,
         "episodes": episodes,
-        "policy": policy.name if policy.is_file() else "latest checkpoint",
+        "policy": which,
         "score_mean": float(np.mean(scored.scores)),
         "score_std": float(np.std(scored.scores)),
         "return_mean": float(np.mean(scored.returns)),
