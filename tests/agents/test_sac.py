@@ -139,5 +139,10 @@ def test_act(buffer):
         rtol=1e-5,
         atol=1e-6,
     )
+    q = np.asarray(agent.q_values(normed, obs, det))
+    assert q.shape == (2, 32) and not np.allclose(q[0], q[1])
+    np.testing.assert_allclose(
+        q, np.asarray(agent.q_values(state, (obs - 0.5) / 2.0, det)), rtol=1e-5, atol=1e-6
+    )
     with pytest.raises(RuntimeError):
         agent.set_normalizer(normed, mean, std)

@@ -283,6 +283,14 @@ def test_act_and_normaliser():
     with pytest.raises(ValueError):
         agent.set_normalizer(state, mean, np.zeros(3))
 
+    # The critics' values see the same normalised observations; each critic is its own.
+    action = np.asarray(agent.act(state, obs))
+    q = np.asarray(agent.q_values(normed, obs, action))
+    assert q.shape == (cfg.num_critics, 64) and not np.allclose(q[0], q[1])
+    np.testing.assert_allclose(
+        q, np.asarray(agent.q_values(state, (obs - full_mean) / full_std, action)), rtol=1e-5
+    )
+
 
 def test_policy_acts_as_the_state_and_serialises_as_policy_files_do():
     import flax.serialization

@@ -138,6 +138,9 @@ class SAC(NamedTuple):
     """update(state, data: ReplayData, size, num_updates) -> (state, metrics)."""
     set_normalizer: Callable[[SACState, ArrayLike, ArrayLike], SACState]
     """set_normalizer(state, mean (obs_dim,), std (obs_dim,)) -> state; allowed once."""
+    q_values: Callable[[SACState, jax.Array, jax.Array], jax.Array]
+    """q_values(state, obs (..., obs_dim), action (..., action_dim)) -> (num_critics, ...): the
+    online critics' values, observations normalised as in training (for diagnostics)."""
 
 
 def make_sac(
@@ -196,6 +199,10 @@ def make_sac(
         if key is None:
             return deterministic_squashed(mean, max_action)
         return sample_squashed(key, mean, log_std, max_action)[0]
+
+    @jax.jit
+    def q_values(state: SACState, obs: jax.Array, action: jax.Array) -> jax.Array:
+        return critic.apply(state.critic_params, normalize(state, obs), action)
 
     def update_step(state: SACState, batch: ReplayData, key: jax.Array):
         k_next, k_pi = jax.random.split(key)
@@ -294,4 +301,5 @@ def make_sac(
         act=act,
         update=jax.jit(update, static_argnames="num_updates"),
         set_normalizer=make_normalizer_setter(obs_dim, time_feature=False),
+        q_values=q_values,
     )

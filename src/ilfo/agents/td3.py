@@ -210,6 +210,9 @@ class TD3(NamedTuple):
     """update(state, data: ReplayData, size, num_updates) -> (state, metrics)."""
     set_normalizer: Callable[[TD3State, ArrayLike, ArrayLike], TD3State]
     """set_normalizer(state, mean, std) -> state; allowed once."""
+    q_values: Callable[[TD3State, jax.Array, jax.Array], jax.Array]
+    """q_values(state, obs (..., obs_dim), action (..., action_dim)) -> (num_critics, ...): the
+    online critics' values, observations normalised as in training (for diagnostics)."""
 
 
 def pal_loss(td: jax.Array, alpha: float = 0.4, min_priority: float = 1.0) -> jax.Array:
@@ -326,6 +329,10 @@ def make_td3(
         noise = jax.random.normal(key, action.shape) * (cfg.exploration_noise * max_action)
         return jnp.clip(action + noise, -max_action, max_action)
 
+    @jax.jit
+    def q_values(state: TD3State, obs: jax.Array, action: jax.Array) -> jax.Array:
+        return critic.apply(state.critic_params, normalize(state, obs), action)
+
     def update_step(state: TD3State, batch: ReplayData, key: jax.Array):
         k_noise, k_time = jax.random.split(key)
         critic_obs, next_obs, not_done = batch.obs, batch.next_obs, batch.not_done
@@ -435,4 +442,5 @@ def make_td3(
         act=act,
         update=update_jit,
         set_normalizer=make_normalizer_setter(obs_dim, cfg.time_augmentation),
+        q_values=q_values,
     )
