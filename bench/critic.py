@@ -71,7 +71,7 @@ def main() -> None:
         steps = [t for t in PROBE_STEPS if t < len(obs)]
         x = obs[steps].astype(np.float32)
         action = agent.functions.act(state, x)
-        q = np.asarray(agent.functions.q_values(state, x, action)).min(axis=0)
+        q = np.asarray(agent.functions.q_values(state, x, action), dtype=np.float64).min(axis=0)
         row: dict = {
             "bench": "critic",
             **meta,
@@ -85,13 +85,13 @@ def main() -> None:
             one, full = x.copy(), x.copy()
             one[:, -1], full[:, -1] = 1.0 / horizon, 1.0
             row["q_one_step_to_go"] = (
-                np.asarray(agent.functions.q_values(state, one, action))
+                np.asarray(agent.functions.q_values(state, one, action), dtype=np.float64)
                 .min(axis=0)
                 .round(2)
                 .tolist()
             )
             row["q_horizon_to_go"] = (
-                np.asarray(agent.functions.q_values(state, full, action))
+                np.asarray(agent.functions.q_values(state, full, action), dtype=np.float64)
                 .min(axis=0)
                 .round(2)
                 .tolist()
