@@ -18,13 +18,14 @@ import json
 import sys
 from datetime import date
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 # Keep this folder off the path: bench/ot.py would shadow POT's `ot`.
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 from ilfo.benchmarking import machine
-from ilfo.train import Trainer, rollout_policy, with_time
+from ilfo.train import Agent, Trainer, rollout_policy, with_time
 
 PROBE_STEPS = (0, 50, 100, 200, 400, 700, 900, 990)
 
@@ -37,6 +38,12 @@ def return_to_go(rewards: np.ndarray, gamma: float) -> np.ndarray:
         acc = rewards[t] + gamma * acc
         out[t] = acc
     return out
+
+
+def min_q(agent: Agent, state: Any, obs: np.ndarray, action: Any) -> np.ndarray:
+    """min_i Q_i(obs, action) of the agent's online critics, in float64."""
+    values = agent.functions.q_values(state, obs, action)
+    return np.asarray(values, dtype=np.float64).min(axis=0)
 
 
 def main() -> None:
@@ -71,7 +78,7 @@ def main() -> None:
         steps = [t for t in PROBE_STEPS if t < len(obs)]
         x = obs[steps].astype(np.float32)
         action = agent.functions.act(state, x)
-        q = np.asarray(agent.functions.q_values(state, x, action), dtype=np.float64).min(axis=0)
+        q = min_q(agent, state, x, action)
         row: dict = {
             "bench": "critic",
             **meta,
@@ -80,23 +87,13 @@ def main() -> None:
             "t": steps,
             "q": q.round(2).tolist(),
             "return_to_go": g[steps].round(2).tolist(),
+            "reward": rewards[steps].round(2).tolist(),
         }
         if agent.time_feature:
             one, full = x.copy(), x.copy()
             one[:, -1], full[:, -1] = 1.0 / horizon, 1.0
-            row["q_one_step_to_go"] = (
-                np.asarray(agent.functions.q_values(state, one, action), dtype=np.float64)
-                .min(axis=0)
-                .round(2)
-                .tolist()
-            )
-            row["q_horizon_to_go"] = (
-                np.asarray(agent.functions.q_values(state, full, action), dtype=np.float64)
-                .min(axis=0)
-                .round(2)
-                .tolist()
-            )
-            row["reward"] = rewards[steps].round(2).tolist()
+            row["q_one_step_to_go"] = min_q(agent, state, one, action).round(2).tolist()
+            row["q_horizon_to_go"] = min_q(agent, state, full, action).round(2).tolist()
         if args.json:
             print(json.dumps(row))
             continue
