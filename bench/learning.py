@@ -47,6 +47,9 @@ def main() -> None:
     parser.add_argument("--preset", default="paper", choices=["paper", "fast"])
     parser.add_argument("--demos", default=None, help="demo file (default: the shipped expert)")
     parser.add_argument("--out", default="bench_runs/learning")
+    parser.add_argument(
+        "--updates-per-step", type=int, default=1, help="update-to-data ratio (paper: 1)"
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
 
@@ -61,6 +64,7 @@ def main() -> None:
             demos=args.demos,
             num_demos=1,
             out=args.out,
+            updates_per_step=args.updates_per_step,
         )
         run_dirs.append(run_seed(config, Path(args.out) / f"{args.env}__{args.algo}__{seed}"))
 
@@ -70,6 +74,7 @@ def main() -> None:
         "env": args.env,
         "algo": args.algo,
         "preset": args.preset,
+        "updates_per_step": args.updates_per_step,
     }
     curves = {}
     for seed, run_dir in zip(args.seeds, run_dirs, strict=True):

@@ -231,3 +231,17 @@ def test_network_normalizer_weighs_expert_and_random_states_alike_as_the_paper_c
     # Without demos (task reward): the random states' own std, floored at 0.33.
     _, alone = network_normalizer(random_states, [])
     np.testing.assert_allclose(alone, [0.33, 0.33, 1.0])
+
+
+@pytest.mark.parametrize("updates_per_step", [1, 3])
+def test_updates_per_step_sets_the_update_count(tmp_path, updates_per_step):
+    config = TrainConfig(**{**TINY, "steps": 400, "updates_per_step": updates_per_step})
+    trainer = Trainer(config, tmp_path / "run", progress=False)
+    trainer.train()
+    # Updates follow every episode collected by the policy (steps 200-400), none the random ones.
+    assert int(trainer.state.step) == 200 * updates_per_step
+
+
+def test_updates_per_step_below_one_is_an_error():
+    with pytest.raises(ValueError, match="updates_per_step must be >= 1"):
+        TrainConfig(**{**TINY, "updates_per_step": 0})

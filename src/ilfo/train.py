@@ -3,8 +3,9 @@
 This is the one place where a rewarder and an agent meet (neither imports the other). It follows
 the paper's code (docs/reproduction.md): uniformly random actions for ``start_steps``, then one
 episode at a time with the policy frozen; at the end of each episode its OT rewards are computed
-and the episode enters the replay buffer, then as many updates run as steps were collected (one
-jitted call). Every ``eval_every`` steps, deterministic fixed-horizon episodes are scored.
+and the episode enters the replay buffer, then as many updates run as steps were collected
+(``updates_per_step`` times as many; jitted calls). Every ``eval_every`` steps, deterministic
+fixed-horizon episodes are scored.
 
 A run directory holds ``config.json``, ``metrics.csv``, ``tb/`` (TensorBoard), ``checkpoints/``,
 ``policy.msgpack`` (the final policy), ``best_policy.msgpack`` and ``best_policy.json`` (the
@@ -93,6 +94,9 @@ class TrainConfig:
     """Environment steps in total (random ones included)."""
     start_steps: int = 10_000
     """Uniformly random steps before the policy acts."""
+    updates_per_step: int = 1
+    """Agent updates per environment step collected (the update-to-data ratio), run after each
+    episode; 1 is the paper's. More spends compute to learn more from the same data."""
     preset: Literal["paper", "fast"] = "paper"
     """TD3/DDPG hyperparameters: paper (critics 1024-1024) or fast (critics 256-256); ``td3``
     (the --td3-* flags) changes single ones."""
@@ -161,6 +165,7 @@ class TrainConfig:
             "checkpoint_every",
             "num_demos",
             "replay_capacity",
+            "updates_per_step",
         ):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
@@ -537,7 +542,7 @@ class Trainer:
             "_steps": num_steps,
         }
         if not random_phase:
-            self.state, metrics = self._update(num_steps)
+            self.state, metrics = self._update(num_steps * cfg.updates_per_step)
             row["critic_loss"] = round(metrics["critic_loss"], 5)
             row["actor_loss"] = round(metrics["actor_loss"], 5)
         if self.step // cfg.eval_every > (self.step - num_steps) // cfg.eval_every:
