@@ -152,6 +152,25 @@ def test_update_deterministic_and_scan_equals_single_steps(buffer):
     assert not tree_allclose(a.actor_params, c.actor_params)
 
 
+def test_grouped_updates_equal_one_by_one_aligned_or_not(buffer):
+    # With policy_delay 2, an even number of updates from an even step runs as groups (critic
+    # update, then critic + actor) with no run-time cond; from an odd step, one by one.
+    agent = make_td3(TD3Config.fast(**TINY), OBS_DIM, ACT_DIM, MAX_ACTION)
+    for first in (0, 1):
+        s = agent.init(5)
+        if first:
+            s, _ = agent.update(s, buffer.data, buffer.size, num_updates=first)
+        grouped, m_grouped = agent.update(s, buffer.data, buffer.size, num_updates=6)
+        singles, actor_losses = s, []
+        for _ in range(6):
+            singles, m = agent.update(singles, buffer.data, buffer.size, num_updates=1)
+            if (int(singles.step)) % 2 == 0:
+                actor_losses.append(float(m["actor_loss"]))
+        assert int(grouped.step) == first + 6
+        assert tree_allclose(grouped, singles, rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(float(m_grouped["actor_loss"]), np.mean(actor_losses), 1e-5)
+
+
 @pytest.mark.parametrize("loss", ["pal", "mse", "huber"])
 def test_critic_loss_decreases(loss):
     # Terminal transitions: the critics regress on a fixed reward r(s, a).

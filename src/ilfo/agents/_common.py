@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import flax
@@ -91,10 +91,32 @@ def scan_updates(
     """``num_updates`` applications of ``update_step`` in one ``lax.scan``, each on a uniform
     batch from slots [0, size) of ``data``; keys come from ``state.key``. Returns the final
     state and the per-update outputs stacked on a leading axis."""
+    return scan_update_groups((update_step,), state, data, size, num_updates, batch_size)
+
+
+def scan_update_groups(
+    update_steps: Sequence[Callable[[Any, ReplayData, jax.Array], tuple[Any, Any]]],
+    state: Any,
+    data: ReplayData,
+    size: jax.Array | int,
+    num_groups: int,
+    batch_size: int,
+) -> tuple[Any, Any]:
+    """``num_groups`` times, apply each of ``update_steps`` in turn, in one ``lax.scan``; each
+    update is drawn and keyed exactly as ``scan_updates`` draws it. Returns the final state and
+    the per-update outputs stacked on a leading axis of ``num_groups * len(update_steps)``.
+
+    A group whose steps differ statically (TD3's delayed actor: critic-only updates, then one
+    with the actor) needs no run-time ``cond``, which XLA schedules poorly on a CPU."""
 
     def body(state: Any, _: None) -> tuple[Any, Any]:
-        key, k_batch, k_step = jax.random.split(state.key, 3)
-        state = state.replace(key=key)
-        return update_step(state, sample_batch(data, size, k_batch, batch_size), k_step)
+        outs = []
+        for update_step in update_steps:
+            key, k_batch, k_step = jax.random.split(state.key, 3)
+            state = state.replace(key=key)
+            state, out = update_step(state, sample_batch(data, size, k_batch, batch_size), k_step)
+            outs.append(out)
+        return state, jax.tree.map(lambda *xs: jnp.stack(xs), *outs)
 
-    return jax.lax.scan(body, state, None, length=num_updates)
+    state, outs = jax.lax.scan(body, state, None, length=num_groups)
+    return state, jax.tree.map(lambda x: x.reshape(-1, *x.shape[2:]), outs)
