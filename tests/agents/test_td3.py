@@ -164,7 +164,7 @@ def test_grouped_updates_equal_one_by_one_aligned_or_not(buffer):
         singles, actor_losses = s, []
         for _ in range(6):
             singles, m = agent.update(singles, buffer.data, buffer.size, num_updates=1)
-            if (int(singles.step)) % 2 == 0:
+            if int(singles.step) % 2 == 0:
                 actor_losses.append(float(m["actor_loss"]))
         assert int(grouped.step) == first + 6
         assert tree_allclose(grouped, singles, rtol=1e-5, atol=1e-6)

@@ -339,7 +339,8 @@ def make_td3(
         state: TD3State, batch: ReplayData, key: jax.Array, train_actor: bool | None = None
     ):
         """One critic update and, every ``policy_delay``-th update, the actor's and the targets'.
-        ``train_actor``: None decides by ``state.step`` at run time; True / False fixes it."""
+        ``train_actor``: None decides by ``state.step`` at run time (a ``cond``); True / False
+        fixes it."""
         k_noise, k_time = jax.random.split(key)
         critic_obs, next_obs, not_done = batch.obs, batch.next_obs, batch.not_done
         if cfg.time_augmentation:
@@ -398,15 +399,12 @@ def make_td3(
                 jnp.zeros((), jnp.float32),
             )
 
-        if train_actor is not None:
-            do_actor = jnp.array(train_actor)
-            outs = actor_step(None) if train_actor else skip(None)
-        elif cfg.policy_delay == 1:
-            do_actor = jnp.array(True)
-            outs = actor_step(None)
-        else:
+        if train_actor is None:
             do_actor = (state.step + 1) % cfg.policy_delay == 0
             outs = jax.lax.cond(do_actor, actor_step, skip, None)
+        else:
+            do_actor = jnp.array(train_actor)
+            outs = actor_step(None) if train_actor else skip(None)
         actor_params, actor_opt_state, actor_target, critic_target, a_loss = outs
         new_state = state.replace(
             actor_params=actor_params,
@@ -430,24 +428,26 @@ def make_td3(
         mean critic loss, mean actor loss (over the updates that trained the actor) and mean Q of
         the batches (all scalars)."""
 
+        # Whole groups of `delay` updates, the actor trained in the last: no run-time cond.
+        # They apply only when the update count is aligned with the delay (always with delay 1;
+        # with 2, when every episode is of even length); otherwise the per-update cond decides.
         delay = cfg.policy_delay
-        if delay == 1 or num_updates % delay:
-            state, outs = scan_updates(update_step, state, data, size, num_updates, cfg.batch_size)
+        group = [functools.partial(update_step, train_actor=False)] * (delay - 1)
+        group.append(functools.partial(update_step, train_actor=True))
+
+        def grouped(state: TD3State):
+            return scan_update_groups(
+                group, state, data, size, num_updates // delay, cfg.batch_size
+            )
+
+        def one_by_one(state: TD3State):
+            return scan_updates(update_step, state, data, size, num_updates, cfg.batch_size)
+
+        if num_updates % delay:
+            state, outs = one_by_one(state)
+        elif delay == 1:
+            state, outs = grouped(state)
         else:
-            # Whole groups of `delay` updates, the actor trained in the last: no run-time cond.
-            # They apply only when the update count is aligned with the delay (it always is
-            # when every episode is of even length); otherwise the per-update cond decides.
-            group = [functools.partial(update_step, train_actor=False)] * (delay - 1)
-            group.append(functools.partial(update_step, train_actor=True))
-
-            def grouped(state: TD3State):
-                return scan_update_groups(
-                    group, state, data, size, num_updates // delay, cfg.batch_size
-                )
-
-            def one_by_one(state: TD3State):
-                return scan_updates(update_step, state, data, size, num_updates, cfg.batch_size)
-
             state, outs = jax.lax.cond(state.step % delay == 0, grouped, one_by_one, state)
         c_loss, a_loss, q_mean, did_actor = outs
         n_actor = jnp.sum(did_actor)
