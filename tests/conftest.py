@@ -1,7 +1,13 @@
 """Test-session setup."""
 
+import os
+
 import jax
 import pytest
+
+# The `ilfo` command enables a persistent compilation cache under ~/.cache; tests run it in
+# process and in subprocesses, and must not write there (the session cache below serves).
+os.environ["ILFO_COMPILATION_CACHE"] = "off"
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -16,6 +16,7 @@ from typing import TextIO
 import numpy as np
 
 from ilfo import demos
+from ilfo.compilation_cache import enable_compilation_cache
 from ilfo.config import add_dataclass_arguments, flag_name, overrides_from_args
 from ilfo.paths import bundled_demos
 from ilfo.rewards import OOPS, PWIL, OOPSConfig
@@ -37,6 +38,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         with warnings.catch_warnings():  # restores the default display on the way out
             warnings.showwarning = _show_warning
+            enable_compilation_cache()  # before the first compilation; see its module
             return args.run(args)
     except (ValueError, FileNotFoundError) as err:
         print(f"ilfo: error: {err}", file=sys.stderr)

@@ -21,6 +21,7 @@ calling the networks, so the networks stay plain functions of their inputs.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Literal
 
@@ -38,7 +39,7 @@ __all__ = [
     "sample_squashed",
 ]
 
-_LOG_2 = float(jnp.log(2.0))
+_LOG_2 = math.log(2.0)
 
 InitName = Literal["flax", "torch"]
 
