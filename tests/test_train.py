@@ -1,8 +1,10 @@
 """The training loop end to end, on tiny budgets (short horizon, fast preset)."""
 
 import csv
+import dataclasses
 import json
 
+import numpy as np
 import pytest
 
 from ilfo.cli import main
@@ -245,3 +247,24 @@ def test_updates_per_step_sets_the_update_count(tmp_path, updates_per_step):
 def test_updates_per_step_below_one_is_an_error():
     with pytest.raises(ValueError, match="updates_per_step must be >= 1"):
         TrainConfig(**{**TINY, "updates_per_step": 0})
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("steps", 1e6),
+        ("updates_per_step", 2.0),
+        ("seed", "0"),
+        ("horizon", 10.5),
+        ("num_demos", True),
+    ],
+)
+def test_counts_that_are_not_integers_are_an_error(field, value):
+    with pytest.raises(ValueError, match=f"{field} must be an integer"):
+        TrainConfig(**{**TINY, field: value})
+
+
+def test_numpy_integers_are_taken_as_ints():
+    config = TrainConfig(**{**TINY, "seed": np.int64(3), "steps": np.int32(400)})
+    assert type(config.seed) is int and type(config.steps) is int
+    assert json.loads(json.dumps(dataclasses.asdict(config)))["seed"] == 3

@@ -21,6 +21,7 @@ import csv
 import dataclasses
 import json
 import math
+import numbers
 import os
 import shutil
 import signal
@@ -158,7 +159,7 @@ class TrainConfig:
             raise ValueError(f"preset must be 'paper' or 'fast', got {self.preset!r}")
         if self.best_by not in ("score", "return"):
             raise ValueError(f"best_by must be 'score' or 'return', got {self.best_by!r}")
-        for name in (
+        counts = (
             "steps",
             "eval_every",
             "eval_episodes",
@@ -166,7 +167,16 @@ class TrainConfig:
             "num_demos",
             "replay_capacity",
             "updates_per_step",
-        ):
+        )
+        for name in (*counts, "start_steps", "seed", "horizon"):
+            value = getattr(self, name)
+            # 1e6 or True would pass the range checks and fail far from here, or not at all.
+            if value is None:
+                continue
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+                raise ValueError(f"{name} must be an integer, got {value!r}")
+            object.__setattr__(self, name, int(value))  # numpy integers: JSON needs int
+        for name in counts:
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.start_steps < 0:
