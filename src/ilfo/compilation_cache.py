@@ -21,6 +21,7 @@ least recently used first, to ``MAX_BYTES`` (JAX's own settings win where the us
 
 from __future__ import annotations
 
+import importlib.util
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -75,6 +76,8 @@ def enable_compilation_cache(environ: Mapping[str, str] | None = None) -> Path |
     jax.config.update("jax_compilation_cache_dir", str(directory))
     if "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in env:
         jax.config.update("jax_persistent_cache_min_compile_time_secs", MIN_COMPILE_SECONDS)
-    if "JAX_COMPILATION_CACHE_MAX_SIZE" not in env:
+    # JAX bounds the cache only with filelock (a dependency of ilfo); unbounded rather than
+    # failing at the first compilation where it is missing.
+    if "JAX_COMPILATION_CACHE_MAX_SIZE" not in env and importlib.util.find_spec("filelock"):
         jax.config.update("jax_compilation_cache_max_size", MAX_BYTES)
     return directory
