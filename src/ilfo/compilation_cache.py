@@ -1,7 +1,7 @@
 """JAX's persistent compilation cache, as the ``ilfo`` command uses it.
 
-Every ``ilfo train`` start or ``--resume`` compiles the agent's update chunks anew: ~15 s at the
-fast preset and ~40 s at the paper's on a 2-core CPU. JAX can keep compiled programs on disk and
+Every ``ilfo train`` start or ``--resume`` compiles the agent's update chunks anew, tens of
+seconds on a 2-core CPU. JAX can keep compiled programs on disk and
 load them in a later process when the program, the compile options, jax/jaxlib and the machine
 are the same; a program that does not match is compiled as usual, so the cache changes how long
 a start takes, never what runs.
