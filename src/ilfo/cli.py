@@ -25,7 +25,11 @@ from ilfo.rewards import OOPS, PWIL, OOPSConfig
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``ilfo`` console script."""
     parser = argparse.ArgumentParser(
-        prog="ilfo", description="Imitation learning from observation (OOPS and its peers)."
+        prog="ilfo",
+        description="Imitation learning from observation (OOPS and its peers).",
+        epilog="Compiled programs are cached in ~/.cache/ilfo/jax ($XDG_CACHE_HOME/ilfo/jax), so "
+        "later starts of the same setting compile less; ILFO_COMPILATION_CACHE=DIR moves the "
+        "cache, ILFO_COMPILATION_CACHE=off turns it off.",
     )
     sub = parser.add_subparsers(dest="command", required=True)
     _add_train_parser(sub)
