@@ -64,6 +64,15 @@ def test_same_seed_same_numbers_and_resume_equals_uninterrupted(tmp_path):
     assert other_seed != full
 
 
+def test_resume_with_oops_warm_starts_equals_uninterrupted(tmp_path):
+    # Warm starts carry Sinkhorn potentials from episode to episode; a resume must restore them.
+    warm = {"oops": {"warm_start": True, "tol": 1e-6}, "steps": 400}
+    full = _metrics(_train(tmp_path, "full", **warm))
+    run = _train(tmp_path, "resumed", **{**warm, "steps": 300})
+    assert (run / "checkpoints" / "step_000000300" / "rewarder_potentials.npz").is_file()
+    assert _metrics(Trainer.resume(run, progress=False, steps=400).train()) == full
+
+
 def test_resume_after_a_crash_drops_rows_logged_after_the_checkpoint(tmp_path):
     full = _metrics(_train(tmp_path, "full", steps=400))
     run = _train(tmp_path, "crashed", steps=300)

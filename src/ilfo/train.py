@@ -75,6 +75,7 @@ SUB_CONFIGS: dict[str, type] = {
 CHECKPOINT_SCHEMA = 1
 BEST_POLICY_FILE = "best_policy.msgpack"
 BEST_POLICY_INFO = "best_policy.json"  # the step and evaluation of best_policy.msgpack
+POTENTIALS_FILE = "rewarder_potentials.npz"  # in a checkpoint: OOPS's warm-start potentials
 
 
 @dataclass(frozen=True)
@@ -440,7 +441,7 @@ class Trainer:
         self.elapsed = 0.0
         self._tb: Any = None  # TensorBoard writer, opened with the first metrics row
         self.best_eval: dict[str, float] = {}
-        """The evaluation with the highest score so far, with its step."""
+        """The best evaluation so far by ``config.best_by``, with its step."""
 
     # ----------------------------------------------------------------------------- the loop
     def train(self) -> Path:
@@ -571,8 +572,9 @@ class Trainer:
         """``num_updates`` agent updates, run as jitted chunks of power-of-two sizes.
 
         ``update`` compiles once per number of updates; episodes of every length would each
-        compile anew, whereas powers of two compile at most log2(horizon) + 1 times. Every update
-        draws its keys from the state, so chunks give exactly the updates one call would.
+        compile anew, whereas powers of two compile at most log2(horizon * updates_per_step) + 1
+        times. Every update draws its keys from the state, so chunks give exactly the updates
+        one call would.
         """
         state, totals = self.state, {"critic_loss": 0.0, "actor_loss": 0.0}
         remaining, chunk = num_updates, 1 << (num_updates.bit_length() - 1)
@@ -664,6 +666,9 @@ class Trainer:
         (tmp / "state.json").write_text(json.dumps(meta))
         if self.random_states:
             np.savez(tmp / "random_states.npz", *self.random_states)
+        save_potentials = getattr(self.rewarder, "save_potentials", None)
+        if save_potentials is not None and (potentials := save_potentials()):
+            np.savez(tmp / POTENTIALS_FILE, **potentials)  # OOPS's warm starts
         shutil.rmtree(final, ignore_errors=True)
         os.replace(tmp, final)
         latest_tmp = root / ".latest.tmp"
@@ -716,6 +721,10 @@ class Trainer:
         trainer.best_eval = meta.get("best_eval", {})
         if meta["rewarder_rng"] is not None and trainer.rewarder is not None:
             trainer.rewarder.rng.bit_generator.state = meta["rewarder_rng"]  # type: ignore[attr-defined]
+        potentials_path = ckpt / POTENTIALS_FILE
+        if potentials_path.is_file() and trainer.rewarder is not None:
+            with np.load(potentials_path, allow_pickle=False) as f:
+                trainer.rewarder.load_potentials({k: f[k] for k in f.files})  # type: ignore[attr-defined]
         random_path = ckpt / "random_states.npz"
         if random_path.is_file():
             with np.load(random_path, allow_pickle=False) as f:

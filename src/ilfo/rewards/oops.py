@@ -8,7 +8,7 @@ Defaults reproduce the paper's code (see docs/reproduction.md for where it depar
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -124,6 +124,22 @@ class OOPS:
             distance=coupling.cost,
             demo_index=index,
         )
+
+    def save_potentials(self) -> dict[str, np.ndarray]:
+        """The potentials kept for warm starts as named arrays, ``f_<demo>`` and ``g_<demo>``
+        (demo -1: the pooled demos); empty without ``warm_start``. ``load_potentials`` puts
+        them back, so that a resumed run solves exactly as the uninterrupted one."""
+        arrays = {}
+        for key, (f, g) in self._potentials.items():
+            arrays[f"f_{key}"], arrays[f"g_{key}"] = f, g
+        return arrays
+
+    def load_potentials(self, arrays: Mapping[str, np.ndarray]) -> None:
+        """Replace the warm-start potentials by those ``save_potentials`` returned."""
+        keys = sorted(int(name[2:]) for name in arrays if name.startswith("f_"))
+        self._potentials = {
+            k: (np.asarray(arrays[f"f_{k}"]), np.asarray(arrays[f"g_{k}"])) for k in keys
+        }
 
     def _solve(self, learner: np.ndarray, expert: np.ndarray, key: int) -> OTResult:
         cfg = self.config
