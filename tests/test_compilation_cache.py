@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from ilfo.cli import main
-from ilfo.compilation_cache import ENV_VAR, cache_dir_from_env
+from ilfo.compilation_cache import ENV_VAR, cache_dir_from_env, enable_compilation_cache
 
 
 @pytest.mark.parametrize("value", ["off", "OFF", "0", "none", "false", "no", " off "])
@@ -72,3 +72,10 @@ def test_users_own_jax_setting_wins_unless_ilfo_is_told(tmp_path):
     assert _probe(tmp_path, JAX_COMPILATION_CACHE_DIR=own, **{ENV_VAR: "off"})["used"] == own
     assert _probe(tmp_path, **{ENV_VAR: "off"}) == {"used": None, "jax": None}
     assert not (tmp_path / "xdg").exists()
+
+
+def test_a_directory_that_cannot_be_written_turns_it_off_with_one_warning(tmp_path):
+    not_a_dir = tmp_path / "file"
+    not_a_dir.write_text("")
+    with pytest.warns(UserWarning, match="compilation cache off: cannot write"):
+        assert enable_compilation_cache({ENV_VAR: str(not_a_dir / "cache")}) is None

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -66,13 +67,25 @@ def enable_compilation_cache(environ: Mapping[str, str] | None = None) -> Path |
     """Point JAX's persistent compilation cache where ``cache_dir_from_env`` says, unless the
     user configured JAX's cache directory themselves and ``ILFO_COMPILATION_CACHE`` is unset
     (then theirs is kept). With ``ILFO_COMPILATION_CACHE=off`` JAX's configuration is left
-    alone. Returns the directory in use, or None when there is none. Call it before the first
-    jitted call of the process: JAX fixes its cache on the first compilation."""
+    alone. A directory that cannot be written turns the cache off with one warning. Returns the
+    directory in use, or None when there is none. Call it before the first jitted call of the
+    process: JAX fixes its cache on the first compilation."""
     env = os.environ if environ is None else environ
     directory = cache_dir_from_env(env)
     own = jax.config.jax_compilation_cache_dir  # JAX_COMPILATION_CACHE_DIR, if the user set it
     if directory is None or (own and ENV_VAR not in env):
         return Path(own) if own else None
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        writable = os.access(directory, os.W_OK)
+    except OSError:
+        writable = False
+    if not writable:  # else JAX would warn at every compilation of the run
+        warnings.warn(
+            f"compilation cache off: cannot write {directory} (set {ENV_VAR}=DIR or off)",
+            stacklevel=2,
+        )
+        return None
     jax.config.update("jax_compilation_cache_dir", str(directory))
     if "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in env:
         jax.config.update("jax_persistent_cache_min_compile_time_secs", MIN_COMPILE_SECONDS)
