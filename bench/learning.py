@@ -29,7 +29,7 @@ from ilfo.train import TrainConfig, Trainer, plot_runs, read_metrics
 
 
 def run_seed(config: TrainConfig, run_dir: Path) -> Path:
-    if (run_dir / "checkpoints" / "latest").is_file():
+    if (run_dir / "config.json").is_file():  # resume finds the newest checkpoint, if any
         trainer = Trainer.resume(run_dir, steps=config.steps)
     else:
         trainer = Trainer(config, run_dir)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import shlex
+import shutil
 import sys
 import time
 import warnings
@@ -47,6 +49,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, FileNotFoundError) as err:
         print(f"ilfo: error: {err}", file=sys.stderr)
         return 2
+    except OSError as err:  # a read-only or full disk, a path under a file: what and where
+        where = f"{err.filename}: " if err.filename else ""
+        print(f"ilfo: error: {where}{err.strerror or err}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         return 130
 
@@ -129,7 +135,21 @@ def _show(value: object) -> str:
     return " ".join(map(str, value)) if isinstance(value, tuple) else str(value)
 
 
+def _command() -> str:
+    """How the user can start this program again from the same directory: ``ilfo`` where that
+    is what the shell finds, else the path it was started by (the README's commands never
+    activate the virtual environment: ``.venv/bin/ilfo``), else ``python -m ilfo.cli``."""
+    started = sys.argv[0] if sys.argv else ""
+    if Path(started).name == "ilfo":
+        found = shutil.which("ilfo")
+        if found and Path(found).resolve() == Path(started).resolve():
+            return "ilfo"
+        return shlex.quote(started)
+    return f"{shlex.quote(sys.executable)} -m ilfo.cli"
+
+
 def _run_train(args: argparse.Namespace) -> int:
+    from ilfo.rundir import create_run_dir
     from ilfo.train import SUB_CONFIGS, TrainConfig, Trainer, run_name
 
     overrides = overrides_from_args(args, TrainConfig)
@@ -156,10 +176,11 @@ def _run_train(args: argparse.Namespace) -> int:
                 for name, given in groups.items()
             },
         )
-        trainer = Trainer(
-            config, Path(config.out) / run_name(config), progress=not args.no_progress
-        )
+        run_dir = create_run_dir(config.out, run_name(config))  # new and empty, never shared
+        trainer = Trainer(config, run_dir, progress=not args.no_progress)
+    trainer.resume_command = f"{_command()} train --resume {shlex.quote(str(trainer.run_dir))}"
     print(f"run directory: {trainer.run_dir}")
+    print(trainer.checkpoint_plan())
     run_dir = trainer.train()
     final = trainer.last_eval
     print(f"done: {run_dir}  last evaluation: {json.dumps(final)}")
@@ -323,8 +344,12 @@ def _run_expert_train(args: argparse.Namespace) -> int:
             checkpoint_every=args.checkpoint_every,
         )
         trainer = Trainer(config, run_dir, progress=not args.no_progress)
-    trainer.resume_command = f"ilfo expert train {args.env} --resume --run-dir {run_dir}"
+    trainer.resume_command = (
+        f"{_command()} expert train {shlex.quote(args.env)} --resume --run-dir "
+        f"{shlex.quote(str(run_dir))}"
+    )
     print(f"run directory: {run_dir}")
+    print(trainer.checkpoint_plan())
     trainer.train()
     print(f"done: {json.dumps(trainer.last_eval)}")
     return 0

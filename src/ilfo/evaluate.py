@@ -2,40 +2,34 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
-import flax.serialization
 import numpy as np
 
 from ilfo.agents import policy_of
 from ilfo.envs import make_env
-from ilfo.train import TrainConfig, Trainer, score_policy
+from ilfo.rundir import CONFIG_FILE, latest_checkpoint, load_msgpack, read_run_config
+from ilfo.train import BEST_POLICY_FILE, Trainer, config_from_dict, score_policy
 
 
 def load_run_policy(run_dir: Path, best: bool = False) -> tuple[Trainer, Any, str]:
     """A run's trainer (its config, environments and agent, fresh) and the policy to evaluate:
-    ``policy.msgpack`` if the run finished, else its latest checkpoint's; with ``best``,
+    ``policy.msgpack`` if the run finished, else its newest checkpoint's; with ``best``,
     ``best_policy.msgpack`` (the best-evaluated policy so far). Returns (trainer, policy,
     which): ``which`` names the policy used."""
     run_dir = Path(run_dir)
-    config_path = run_dir / "config.json"
-    if not config_path.is_file():
-        raise FileNotFoundError(f"{run_dir} is not a run directory (no config.json)")
-    policy = run_dir / ("best_policy.msgpack" if best else "policy.msgpack")
+    config = config_from_dict(read_run_config(run_dir), run_dir / CONFIG_FILE)
+    policy = run_dir / (BEST_POLICY_FILE if best else "policy.msgpack")
     if best and not policy.is_file():
-        raise FileNotFoundError(f"{run_dir} has no best_policy.msgpack (no evaluation yet)")
-    config = TrainConfig(**json.loads(config_path.read_text()))
+        raise FileNotFoundError(f"{run_dir} has no {BEST_POLICY_FILE} (no evaluation yet)")
     trainer = Trainer(config, run_dir, progress=False)
     if policy.is_file():
-        state = flax.serialization.from_bytes(policy_of(trainer.state), policy.read_bytes())
-        return trainer, state, policy.name
-    latest = run_dir / "checkpoints" / "latest"
-    if not latest.is_file():
+        return trainer, load_msgpack(policy_of(trainer.state), policy, "policy"), policy.name
+    checkpoint = latest_checkpoint(run_dir)
+    if checkpoint is None:
         raise FileNotFoundError(f"{run_dir} has neither policy.msgpack nor a checkpoint")
-    ckpt = run_dir / "checkpoints" / latest.read_text().strip() / "agent.msgpack"
-    state = flax.serialization.from_bytes(trainer.state, ckpt.read_bytes())
+    state = load_msgpack(trainer.state, checkpoint / "agent.msgpack", "agent checkpoint")
     return trainer, state, "latest checkpoint"
 
 

@@ -28,14 +28,15 @@ from ilfo import demos as demo_io
 from ilfo.agents import Policy, policy_of
 from ilfo.envs import make_env, termination_is_finish
 from ilfo.paths import DATA_DIR
+from ilfo.rundir import load_msgpack, read_run_config
 from ilfo.train import (
     BEST_POLICY_FILE,
     BEST_POLICY_INFO,
     Agent,
     TrainConfig,
     Trainer,
+    config_from_dict,
     make_agent,
-    read_run_config,
     rollout_policy,
     score_policy,
 )
@@ -181,20 +182,20 @@ def load_expert(path: str | Path) -> ExpertPolicy:
         path = expert_dir(str(path))
     if not (path / EXPERT_FILE).is_file() or not (path / POLICY_FILE).is_file():
         raise FileNotFoundError(f"no expert at {path} (needs {EXPERT_FILE} and {POLICY_FILE})")
-    record = json.loads((path / EXPERT_FILE).read_text())
-    config = TrainConfig(**record["train_config"])
-    env = make_env(config.env, True, horizon=record["horizon"])
+    record_path = path / EXPERT_FILE
+    try:
+        record = json.loads(record_path.read_text(encoding="utf-8"))
+        raw_config, horizon = dict(record["train_config"]), int(record["horizon"])
+    except (ValueError, KeyError, TypeError) as err:
+        raise ValueError(f"{record_path} is not a readable expert record ({err})") from None
+    config = config_from_dict(raw_config, record_path)
+    env = make_env(config.env, True, horizon=horizon)
     obs_dim = int(np.prod(env.observation_space.shape))
     action_dim = int(np.prod(env.action_space.shape))
-    agent = make_agent(
-        config, obs_dim, action_dim, float(env.action_space.high.flat[0]), record["horizon"]
-    )
+    agent = make_agent(config, obs_dim, action_dim, float(env.action_space.high.flat[0]), horizon)
     template = policy_of(agent.functions.init(config.seed))
-    try:
-        policy = flax.serialization.from_bytes(template, (path / POLICY_FILE).read_bytes())
-    except (ValueError, KeyError) as err:
-        raise ValueError(f"{path / POLICY_FILE} does not match its expert.json: {err}") from err
-    return ExpertPolicy(config, agent, policy, int(record["horizon"]))
+    policy = load_msgpack(template, path / POLICY_FILE, "expert policy")
+    return ExpertPolicy(config, agent, policy, horizon)
 
 
 def collect_demos(

@@ -34,6 +34,8 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ilfo.rundir import load_npz
+
 __all__ = ["ReplayBuffer", "ReplayData", "sample_batch"]
 
 SCHEMA_VERSION = 1
@@ -269,8 +271,9 @@ class ReplayBuffer:
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> ReplayBuffer:
-        """Read a buffer written by ``save``."""
-        with np.load(path, allow_pickle=False) as f:
+        """Read a buffer written by ``save``; a damaged file is a ValueError naming it."""
+        f = load_npz(path, "replay buffer")
+        try:
             version = int(f["schema_version"])
             if version != SCHEMA_VERSION:
                 raise ValueError(f"replay file schema {version}, expected {SCHEMA_VERSION}")
@@ -284,4 +287,6 @@ class ReplayBuffer:
                 f["episode_ids"], f["episode_starts"], f["episode_lengths"], strict=True
             ):
                 buf._episodes[int(episode_id)] = (int(start), int(length))
+        except (KeyError, ValueError, TypeError) as err:
+            raise ValueError(f"{path} is not a readable replay buffer ({err})") from None
         return buf

@@ -53,6 +53,19 @@ from ilfo.envs import episode_scores, make_env
 from ilfo.paths import DATA_DIR
 from ilfo.replay import ReplayBuffer
 from ilfo.rewards import OOPS, PWIL, OOPSConfig, PWILConfig, Rewarder
+from ilfo.rundir import (
+    CHECKPOINTS_DIR,
+    CONFIG_FILE,
+    RunLock,
+    checkpoint_steps,
+    fault_point,
+    latest_checkpoint,
+    load_msgpack,
+    load_npz,
+    read_run_config,
+    remove_incomplete_checkpoints,
+    write_json_atomic,
+)
 
 Algo = Literal["oops-td3", "oops-ddpg", "oops-sac", "pwil-td3", "td3", "sac"]
 ALGOS: tuple[str, ...] = ("oops-td3", "oops-ddpg", "oops-sac", "pwil-td3", "td3", "sac")
@@ -123,7 +136,11 @@ class TrainConfig:
     or ``return`` (the standard return, which stops at the first fall: what an expert is judged
     by; ``ilfo expert train`` uses it)."""
     checkpoint_every: int = 50_000
-    """Checkpoint every this many environment steps (and on Ctrl-C)."""
+    """Checkpoint every this many environment steps (and on Ctrl-C, and at the end)."""
+    checkpoint_minutes: float = 10.0
+    """Also checkpoint when this many minutes of wall-clock time have passed since the last
+    checkpoint (or the start), so that a crash loses at most that much of any run, short runs
+    included; 0 turns the clock off (steps only)."""
     replay_capacity: int = 1_000_000
     """Replay buffer size in transitions."""
     out: str = "runs"
@@ -182,6 +199,12 @@ class TrainConfig:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.start_steps < 0:
             raise ValueError(f"start_steps must be >= 0, got {self.start_steps}")
+        minutes = self.checkpoint_minutes
+        if isinstance(minutes, bool) or not isinstance(minutes, numbers.Real):
+            raise ValueError(f"checkpoint_minutes must be a number, got {minutes!r}")
+        if not (math.isfinite(minutes) and minutes >= 0):
+            raise ValueError(f"checkpoint_minutes must be >= 0 (0: off), got {minutes!r}")
+        object.__setattr__(self, "checkpoint_minutes", float(minutes))
         if self.healthy_angle_range is not None:  # a list, as read back from config.json
             angles = tuple(float(v) for v in self.healthy_angle_range)
             if len(angles) != 2 or not angles[0] < angles[1]:
@@ -442,20 +465,49 @@ class Trainer:
         self._tb: Any = None  # TensorBoard writer, opened with the first metrics row
         self.best_eval: dict[str, float] = {}
         """The best evaluation so far by ``config.best_by``, with its step."""
+        self._lock = RunLock(self.run_dir)  # held while this trainer writes the run directory
+        self._resumed = False  # set by ``resume``: the run directory holds this run already
+        self._tb_purge_step: int | None = None  # set by ``resume``: see ``_write_metrics``
+
+    def checkpoint_plan(self) -> str:
+        """Where and when this run checkpoints, in words (the CLI prints it at the start)."""
+        cfg = self.config
+        clock = f" and every {cfg.checkpoint_minutes:g} min" if cfg.checkpoint_minutes else ""
+        return (
+            f"checkpoints: {self.run_dir / CHECKPOINTS_DIR}, every {cfg.checkpoint_every:,} "
+            f"steps{clock}, at the end and on Ctrl-C"
+        )
 
     # ----------------------------------------------------------------------------- the loop
     def train(self) -> Path:
         """Run until ``config.steps``; returns the run directory."""
-        cfg = self.config
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        config_path = self.run_dir / "config.json"
-        if not config_path.exists():
+        self._lock.acquire()  # one writer per run directory (RunDirInUse otherwise)
+        try:
+            return self._train()
+        finally:
+            if self._tb is not None:
+                self._tb.close()
+                self._tb = None
+            self._lock.release()
+
+    def _train(self) -> Path:
+        cfg = self.config
+        config_path = self.run_dir / CONFIG_FILE
+        if not self._resumed:
+            if config_path.exists():
+                raise ValueError(
+                    f"{self.run_dir} holds a run already: continue it with "
+                    "Trainer.resume (ilfo train --resume), or choose another directory"
+                )
             resolved = cfg.resolved(self.horizon)  # every setting, as the run uses it
-            config_path.write_text(json.dumps(dataclasses.asdict(resolved), indent=2) + "\n")
+            write_json_atomic(config_path, dataclasses.asdict(resolved))
         bar = _progress_bar(cfg.steps, self.step, self.progress)
         start_wall = time.perf_counter() - self.elapsed
         next_checkpoint = (self.step // cfg.checkpoint_every + 1) * cfg.checkpoint_every
         last_checkpoint = self.step
+        checkpoint_seconds = 60.0 * cfg.checkpoint_minutes or math.inf
+        last_checkpoint_time = time.monotonic()
         try:
             with _stop_requests() as stop:
                 while self.step < cfg.steps:
@@ -465,11 +517,17 @@ class Trainer:
                     row["wall_time"] = round(self.elapsed, 3)
                     row["steps_per_s"] = round(row.pop("_steps") / (time.perf_counter() - t0), 1)
                     self._write_metrics(row)
+                    fault_point("episode_end")
                     bar.update(self.step - bar.n)
                     bar.set_postfix(_postfix(row, self.last_eval), refresh=False)
-                    if self.step >= next_checkpoint or self.step >= cfg.steps or stop.requested:
+                    if (
+                        self.step >= next_checkpoint
+                        or self.step >= cfg.steps
+                        or stop.requested
+                        or time.monotonic() - last_checkpoint_time >= checkpoint_seconds
+                    ):
                         self.save_checkpoint()
-                        last_checkpoint = self.step
+                        last_checkpoint, last_checkpoint_time = self.step, time.monotonic()
                         next_checkpoint = (self.step // cfg.checkpoint_every + 1) * (
                             cfg.checkpoint_every
                         )
@@ -479,17 +537,12 @@ class Trainer:
             # A stop request is honoured at an episode boundary, just checkpointed; a second
             # Ctrl-C quits at once, and the last checkpoint (consistent by construction) stays.
             bar.close()
-            if self._tb is not None:
-                self._tb.close()
-                self._tb = None
             print(
                 f"\ninterrupted: checkpoint at step {last_checkpoint}; continue with "
                 f"`{self.resume_command}`"
             )
             raise
         bar.close()
-        if self._tb is not None:
-            self._tb.close()
         self._save_policy()
         plot_runs([self.run_dir], self.run_dir / "learning_curve.png")
         return self.run_dir
@@ -563,9 +616,8 @@ class Trainer:
             if self.last_eval[best_key] > self.best_eval.get(best_key, -math.inf):
                 self.best_eval = {"step": self.step, **self.last_eval}
                 self._save_policy(BEST_POLICY_FILE)
-                tmp = self.run_dir / f".{BEST_POLICY_INFO}.tmp"
-                tmp.write_text(json.dumps({**self.best_eval, "elapsed": self.elapsed}) + "\n")
-                os.replace(tmp, self.run_dir / BEST_POLICY_INFO)
+                info = {**self.best_eval, "elapsed": self.elapsed}
+                write_json_atomic(self.run_dir / BEST_POLICY_INFO, info)
         return row
 
     def _update(self, num_updates: int) -> tuple[Any, dict[str, float]]:
@@ -630,12 +682,10 @@ class Trainer:
     def _write_metrics(self, row: dict[str, Any]) -> None:
         """Append a row to metrics.csv and its scalars to the TensorBoard events file."""
         if self._tb is None:
-            from tensorboardX import SummaryWriter
-
-            self._tb = SummaryWriter(str(self.run_dir / "tb"), flush_secs=30)
-        for key, value in row.items():
-            if key not in ("step", "episode") and isinstance(value, int | float):
-                self._tb.add_scalar(key, value, global_step=row["step"])
+            self._tb = TensorBoardLog(self.run_dir / "tb", purge_step=self._tb_purge_step)
+        self._tb.add_scalars(
+            {k: v for k, v in row.items() if k not in ("step", "episode")}, row["step"]
+        )
         path = self.run_dir / "metrics.csv"
         new = not path.exists()
         with path.open("a", newline="") as f:
@@ -645,15 +695,29 @@ class Trainer:
             writer.writerow({k: row.get(k, "") for k in METRIC_FIELDS})
 
     def save_checkpoint(self) -> Path:
-        """Write the run's whole state at this episode boundary (atomically: a crash while
-        writing leaves the previous checkpoint in place)."""
-        root = self.run_dir / "checkpoints"
+        """Write the run's whole state at this episode boundary.
+
+        Written in ``checkpoints/.tmp_step_N`` and renamed to ``step_N`` once complete (the
+        rename is atomic), then older checkpoints are removed: a kill at any moment leaves at
+        least one complete checkpoint, the newest of which resume finds by scanning
+        (``rundir.latest_checkpoint``). TensorBoard is flushed first, so that its events hold
+        every row up to the checkpoint, as metrics.csv does."""
+        if self._tb is not None:
+            self._tb.flush()
+        root = self.run_dir / CHECKPOINTS_DIR
         final = root / f"step_{self.step:09d}"
+        if latest_checkpoint(self.run_dir) == final:
+            return final  # this step is checkpointed already: the state has not changed since
         tmp = root / f".tmp_step_{self.step:09d}"
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir(parents=True)
         (tmp / "agent.msgpack").write_bytes(flax.serialization.to_bytes(self.state))
         self.buffer.save(tmp / "replay.npz")
+        if self.random_states:
+            np.savez(tmp / "random_states.npz", *self.random_states)
+        save_potentials = getattr(self.rewarder, "save_potentials", None)
+        if save_potentials is not None and (potentials := save_potentials()):
+            np.savez(tmp / POTENTIALS_FILE, **potentials)  # OOPS's warm starts
         meta = {
             "schema": CHECKPOINT_SCHEMA,
             "step": self.step,
@@ -663,73 +727,109 @@ class Trainer:
             "best_eval": self.best_eval,
             "rewarder_rng": _rng_state(self.rewarder),
         }
-        (tmp / "state.json").write_text(json.dumps(meta))
-        if self.random_states:
-            np.savez(tmp / "random_states.npz", *self.random_states)
-        save_potentials = getattr(self.rewarder, "save_potentials", None)
-        if save_potentials is not None and (potentials := save_potentials()):
-            np.savez(tmp / POTENTIALS_FILE, **potentials)  # OOPS's warm starts
-        shutil.rmtree(final, ignore_errors=True)
+        (tmp / "state.json").write_text(json.dumps(meta))  # last: see rundir.CHECKPOINT_FILES
+        fault_point("checkpoint_before_rename")
         os.replace(tmp, final)
-        latest_tmp = root / ".latest.tmp"
-        latest_tmp.write_text(final.name)
-        os.replace(latest_tmp, root / "latest")
-        for old in root.glob("step_*"):
-            if old != final:
-                shutil.rmtree(old, ignore_errors=True)
+        fault_point("checkpoint_before_cleanup")
+        for _, old in checkpoint_steps(self.run_dir)[:-1]:
+            shutil.rmtree(old, ignore_errors=True)
         return final
 
     @classmethod
     def resume(
         cls, run_dir: str | Path, *, progress: bool = True, steps: int | None = None
     ) -> Trainer:
-        """Reload a run from its last checkpoint to continue it; ``steps`` may extend its
-        budget. Rows of metrics.csv logged after the checkpoint are dropped (they will be
-        logged again)."""
+        """Reload a run from its newest checkpoint to continue it; ``steps`` may change its
+        budget, down to the steps already done.
+
+        Changes files only once the checkpoint has loaded: rows of metrics.csv logged after the
+        checkpoint are dropped (they will be logged again, as TensorBoard's are purged), what a
+        killed checkpoint write left is removed, and a new ``steps`` is written to config.json.
+        A run killed before its first checkpoint starts again from step 0 (with a warning).
+        The returned trainer owns the run directory (``RunDirInUse`` if another process does)
+        until its ``train`` returns.
+        """
         run_dir = Path(run_dir)
+        raw = read_run_config(run_dir)
         if steps is not None:
-            raw = read_run_config(run_dir)
-            raw["steps"] = steps
-            TrainConfig(**raw)  # validate before writing
-            (run_dir / "config.json").write_text(json.dumps(raw, indent=2) + "\n")
-        trainer = cls.from_checkpoint(run_dir, progress=progress)
-        _truncate_metrics(run_dir / "metrics.csv", trainer.step)
+            raw = {**raw, "steps": steps}
+        lock = RunLock(run_dir).acquire()
+        try:
+            config = config_from_dict(raw, run_dir / CONFIG_FILE)
+            trainer = cls(config, run_dir, progress=progress)
+            checkpoint = latest_checkpoint(run_dir)
+            if checkpoint is None:
+                warnings.warn(
+                    f"{run_dir} has no complete checkpoint yet: the run starts again from step 0",
+                    stacklevel=2,
+                )
+            else:
+                trainer._load_checkpoint(checkpoint)
+            if trainer.step > config.steps:
+                raise ValueError(
+                    f"{run_dir} has done {trainer.step} steps already (its checkpoint): --steps "
+                    f"{config.steps} would shorten it; pass at least {trainer.step}"
+                )
+            remove_incomplete_checkpoints(run_dir)
+            if steps is not None:
+                write_json_atomic(run_dir / CONFIG_FILE, raw)
+            _truncate_metrics(run_dir / "metrics.csv", trainer.step)
+        except BaseException:
+            lock.release()
+            raise
+        trainer._lock, trainer._resumed = lock, True
+        trainer._tb_purge_step = trainer.step + 1
         return trainer
 
     @classmethod
     def from_checkpoint(
         cls, run_dir: str | Path, *, progress: bool = True, with_replay: bool = True
     ) -> Trainer:
-        """A trainer in the state of the run's last checkpoint; changes no file."""
+        """A trainer in the state of the run's newest checkpoint; changes no file."""
         run_dir = Path(run_dir)
-        trainer = cls(TrainConfig(**read_run_config(run_dir)), run_dir, progress=progress)
-        latest = run_dir / "checkpoints" / "latest"
-        if not latest.is_file():
+        config = config_from_dict(read_run_config(run_dir), run_dir / CONFIG_FILE)
+        checkpoint = latest_checkpoint(run_dir)
+        if checkpoint is None:
             raise FileNotFoundError(f"{run_dir} has no checkpoint to resume from")
-        ckpt = run_dir / "checkpoints" / latest.read_text().strip()
-        meta = json.loads((ckpt / "state.json").read_text())
-        if meta.get("schema") != CHECKPOINT_SCHEMA:
-            raise ValueError(f"{ckpt}: checkpoint schema {meta.get('schema')}, expected 1")
-        trainer.state = flax.serialization.from_bytes(
-            trainer.state, (ckpt / "agent.msgpack").read_bytes()
-        )
+        trainer = cls(config, run_dir, progress=progress)
+        trainer._load_checkpoint(checkpoint, with_replay=with_replay)
+        return trainer
+
+    def _load_checkpoint(self, ckpt: Path, with_replay: bool = True) -> None:
+        """Restore the state saved in checkpoint directory ``ckpt``; a damaged or mismatched
+        file is a ValueError naming it."""
+        state_path = ckpt / "state.json"
+        try:
+            meta = json.loads(state_path.read_text(encoding="utf-8"))
+            if meta.get("schema") != CHECKPOINT_SCHEMA:
+                raise ValueError(f"checkpoint schema {meta.get('schema')}, expected 1")
+            step, episode = int(meta["step"]), int(meta["episode"])
+            elapsed, last_eval = float(meta["elapsed"]), dict(meta["last_eval"])
+            best_eval, rewarder_rng = dict(meta.get("best_eval", {})), meta["rewarder_rng"]
+        except (ValueError, KeyError, TypeError, AttributeError) as err:
+            raise ValueError(f"{state_path} is not a readable checkpoint state ({err})") from None
+        self.state = load_msgpack(self.state, ckpt / "agent.msgpack", "agent checkpoint")
         if with_replay:
-            trainer.buffer = ReplayBuffer.load(ckpt / "replay.npz")
-        trainer.step, trainer.episode = int(meta["step"]), int(meta["episode"])
-        trainer.elapsed = float(meta["elapsed"])
-        trainer.last_eval = meta["last_eval"]
-        trainer.best_eval = meta.get("best_eval", {})
-        if meta["rewarder_rng"] is not None and trainer.rewarder is not None:
-            trainer.rewarder.rng.bit_generator.state = meta["rewarder_rng"]  # type: ignore[attr-defined]
+            buffer = ReplayBuffer.load(ckpt / "replay.npz")
+            expected = (self.buffer.obs_dim, self.buffer.action_dim)
+            if (buffer.obs_dim, buffer.action_dim) != expected:
+                raise ValueError(
+                    f"{ckpt / 'replay.npz'}: transitions of (obs, action) dims "
+                    f"{(buffer.obs_dim, buffer.action_dim)}, this run's config makes {expected}"
+                )
+            self.buffer = buffer
+        self.step, self.episode, self.elapsed = step, episode, elapsed
+        self.last_eval, self.best_eval = last_eval, best_eval
+        if rewarder_rng is not None and self.rewarder is not None:
+            self.rewarder.rng.bit_generator.state = rewarder_rng  # type: ignore[attr-defined]
         potentials_path = ckpt / POTENTIALS_FILE
-        if potentials_path.is_file() and trainer.rewarder is not None:
-            with np.load(potentials_path, allow_pickle=False) as f:
-                trainer.rewarder.load_potentials({k: f[k] for k in f.files})  # type: ignore[attr-defined]
+        if potentials_path.is_file() and self.rewarder is not None:
+            potentials = load_npz(potentials_path, "Sinkhorn potentials")
+            self.rewarder.load_potentials(potentials)  # type: ignore[attr-defined]
         random_path = ckpt / "random_states.npz"
         if random_path.is_file():
-            with np.load(random_path, allow_pickle=False) as f:
-                trainer.random_states = [f[k] for k in sorted(f.files, key=_arr_index)]
-        return trainer
+            arrays = load_npz(random_path, "random-phase states")
+            self.random_states = [arrays[k] for k in sorted(arrays, key=_arr_index)]
 
     def _save_policy(self, name: str = "policy.msgpack") -> None:
         """The policy alone (actor parameters and observation normaliser), atomically."""
@@ -811,12 +911,20 @@ def score_policy(
     return PolicyScores(np.array(scores), np.array(returns), np.array(distances), frames)
 
 
-def read_run_config(run_dir: Path) -> dict[str, Any]:
-    """A run directory's config.json as a dict (a clear error if it is not a run directory)."""
-    path = run_dir / "config.json"
-    if not path.is_file():
-        raise FileNotFoundError(f"{run_dir} is not a run directory (no config.json)")
-    return json.loads(path.read_text())
+def config_from_dict(raw: dict[str, Any], source: str | Path) -> TrainConfig:
+    """A ``TrainConfig`` from a dict read from a file (config.json, expert.json); a ValueError
+    names ``source`` and the setting at fault (an unknown key, a value of the wrong type)."""
+    known = {f.name for f in dataclasses.fields(TrainConfig)}
+    unknown = sorted(set(raw) - known)
+    if unknown:
+        raise ValueError(
+            f"{source}: unknown setting(s) {', '.join(map(repr, unknown))} (written by another "
+            "ilfo version, or edited?)"
+        )
+    try:
+        return TrainConfig(**raw)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{source}: {err}") from None
 
 
 def _rng_state(rewarder: Any) -> dict | None:
@@ -838,6 +946,47 @@ def _truncate_metrics(path: Path, step: int) -> None:
         writer = csv.DictWriter(f, fieldnames=METRIC_FIELDS)
         writer.writeheader()
         writer.writerows(r for r in rows if int(r["step"]) <= step)
+
+
+class TensorBoardLog:
+    """Scalars to a TensorBoard events file in ``logdir``, written synchronously and flushed by
+    ``flush``: tensorboardX's SummaryWriter queues events for a thread whose flush does not wait
+    for the queue, so a kill could lose events logged before a checkpoint.
+
+    ``purge_step`` S (a resumed run: its checkpoint's step + 1) starts the file with
+    TensorBoard's session-start marker at S, which hides the events at S and after that an
+    earlier process wrote, as metrics.csv drops those rows."""
+
+    def __init__(self, logdir: Path, purge_step: int | None = None) -> None:
+        from tensorboardX.event_file_writer import EventsWriter
+        from tensorboardX.proto.event_pb2 import Event, SessionLog
+        from tensorboardX.summary import scalar
+
+        self._event, self._scalar = Event, scalar
+        logdir.mkdir(parents=True, exist_ok=True)
+        # One file per process and start: names hold the time in seconds only.
+        suffix = f".{os.getpid()}.{purge_step or 0}"
+        self._writer = EventsWriter(str(logdir / "events"), filename_suffix=suffix)
+        if purge_step is not None:
+            start = SessionLog(status=SessionLog.START)
+            event = Event(wall_time=time.time(), step=purge_step, session_log=start)
+            self._writer.write_event(event)
+
+    def add_scalars(self, values: dict[str, Any], step: int) -> None:
+        """Log every int or float of ``values`` at ``step``."""
+        now = time.time()
+        for tag, value in values.items():
+            if isinstance(value, int | float) and not isinstance(value, bool):
+                summary = self._scalar(tag, float(value))
+                self._writer.write_event(self._event(wall_time=now, step=step, summary=summary))
+
+    def flush(self) -> None:
+        """Write what was logged to the file."""
+        self._writer.flush()
+
+    def close(self) -> None:
+        """Flush and close the file."""
+        self._writer.close()
 
 
 class _StopRequest:

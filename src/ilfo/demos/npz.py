@@ -88,37 +88,52 @@ def save(
 
 
 def load(path: str | Path) -> DemoFile:
-    """Read a schema-1 file; raise ValueError naming the problem for a bad one."""
+    """Read a schema-1 file and check all of it (shapes, dtypes, NaN or inf in any array); raise
+    ValueError naming the file and the problem for a bad one."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no demonstration file at {path}")
+    if not zipfile.is_zipfile(path):
+        raise ValueError(f"{path} is not an .npz archive (nor any demonstration file ilfo reads)")
     try:
         with np.load(path, allow_pickle=False) as archive:
             data = {k: archive[k] for k in archive.files}
-    except (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError, TypeError) as err:
+    except ValueError as err:
+        if "allow_pickle" in str(err):
+            raise ValueError(
+                f"{path} holds pickled Python objects, which ilfo never loads"
+            ) from None
+        raise ValueError(f"{path} is not a readable .npz archive ({err})") from None
+    except (zipfile.BadZipFile, zlib.error, OSError, EOFError, KeyError, TypeError) as err:
         raise ValueError(f"{path} is not a readable .npz archive ({err})") from None
     for key in ("schema_version", "episode_lengths", "observations"):
         if key not in data:
             raise ValueError(f"{path} lacks the key {key!r}: not an ilfo demonstration file")
-    if int(data["schema_version"]) != SCHEMA_VERSION:
-        raise ValueError(f"{path} has schema {int(data['schema_version'])}, expected 1")
-    lengths = data["episode_lengths"].astype(np.int64)
-    obs = data["observations"]
-    if obs.ndim != 2 or lengths.ndim != 1 or (lengths < 2).any() or lengths.sum() != len(obs):
-        raise ValueError(f"{path}: observations {obs.shape} do not match episode_lengths")
-    if not np.isfinite(obs).all():
-        raise ValueError(f"{path}: observations contain NaN or inf")
+    try:
+        schema = int(data["schema_version"])
+    except (TypeError, ValueError):
+        raise ValueError(f"{path}: schema_version is not a number") from None
+    if schema != SCHEMA_VERSION:
+        raise ValueError(f"{path} has schema {schema}, expected 1")
+    lengths = numeric_array(data["episode_lengths"], "episode_lengths", path)
+    obs = numeric_array(data["observations"], "observations", path)
+    if lengths.dtype.kind not in "iu" or lengths.ndim != 1 or len(lengths) == 0:
+        raise ValueError(f"{path}: episode_lengths must be a non-empty 1-D array of integers")
+    lengths = lengths.astype(np.int64)
+    if obs.ndim != 2 or (lengths < 2).any() or lengths.sum() != len(obs):
+        raise ValueError(
+            f"{path}: observations {obs.shape} do not match episode_lengths (each episode needs "
+            "T + 1 >= 2 observations, all episodes end to end)"
+        )
     bounds = np.concatenate([[0], np.cumsum(lengths)])
     step_bounds = np.concatenate([[0], np.cumsum(lengths - 1)])
     extras = {}
     for name in ("actions", "rewards", "terminated"):
         if name in data:
-            if len(data[name]) != step_bounds[-1]:
+            if data[name].ndim == 0 or len(data[name]) != step_bounds[-1]:
                 raise ValueError(
-                    f"{path}: {name} has {len(data[name])} rows, not {step_bounds[-1]}"
+                    f"{path}: {name} has shape {data[name].shape}, not {step_bounds[-1]} rows"
                 )
-            if name == "terminated" and data[name].dtype != np.bool_:
-                raise ValueError(f"{path}: terminated must be boolean, not {data[name].dtype}")
             extras[name] = data[name]
     episodes = [
         Episode(
@@ -127,6 +142,81 @@ def load(path: str | Path) -> DemoFile:
         )
         for i in range(len(lengths))
     ]
-    provenance = json.loads(str(data["provenance"])) if "provenance" in data else {}
+    try:
+        provenance = json.loads(str(data["provenance"])) if "provenance" in data else {}
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{path}: provenance is not valid JSON ({err})") from None
+    if not isinstance(provenance, dict):
+        raise ValueError(f"{path}: provenance must be a JSON object")
     env_id = str(data["env_id"]) if "env_id" in data else ""
-    return DemoFile(episodes=episodes, env_id=env_id, provenance=provenance)
+    return DemoFile(episodes=checked_episodes(episodes, path), env_id=env_id, provenance=provenance)
+
+
+def numeric_array(arr: np.ndarray, name: str, path: Path) -> np.ndarray:
+    arr = np.asarray(arr)
+    if arr.dtype.kind not in "biuf":
+        raise ValueError(f"{path}: {name!r} holds {arr.dtype} data, not numbers")
+    return arr
+
+
+def checked_episodes(episodes: list[Episode], path: Path) -> list[Episode]:
+    """Episodes with observations (T + 1, d) as floats, actions (T, a), rewards (T,), all finite
+    and with the same d and a throughout, terminated (T,) boolean; raise ValueError naming the
+    first problem."""
+    if not episodes:
+        raise ValueError(f"{path} holds no episodes")
+    out = []
+    obs_dim = act_dim = None
+    for i, ep in enumerate(episodes):
+        where = f"{path}: episode {i}"
+        obs = numeric_array(ep.observations, "observations", path)
+        if obs.ndim != 2 or len(obs) < 2:
+            raise ValueError(
+                f"{where}: observations have shape {obs.shape}, not (T + 1, d), T >= 1"
+            )
+        if obs.dtype.kind != "f":
+            obs = obs.astype(np.float64)
+        if not np.isfinite(obs).all():
+            raise ValueError(f"{where}: observations contain NaN or inf")
+        if obs_dim is None:
+            obs_dim = obs.shape[1]
+        if obs.shape[1] != obs_dim or obs_dim == 0:
+            raise ValueError(
+                f"{where}: observations have dim {obs.shape[1]}, episode 0 has {obs_dim}"
+            )
+        steps = len(obs) - 1
+        actions = ep.actions
+        if actions is not None:
+            actions = numeric_array(actions, "actions", path)
+            if actions.ndim == 1:
+                actions = actions[:, None]
+            if actions.ndim != 2 or len(actions) != steps:
+                raise ValueError(f"{where}: actions have shape {actions.shape}, not ({steps}, a)")
+            if act_dim is None:
+                act_dim = actions.shape[1]
+            if actions.shape[1] != act_dim:
+                raise ValueError(
+                    f"{where}: actions have dim {actions.shape[1]}, an earlier episode {act_dim}"
+                )
+            if not np.isfinite(actions).all():
+                raise ValueError(f"{where}: actions contain NaN or inf")
+        rewards = ep.rewards
+        if rewards is not None:
+            rewards = numeric_array(rewards, "rewards", path)
+            if rewards.ndim == 2 and rewards.shape[1:] == (1,):
+                rewards = rewards[:, 0]
+            if rewards.shape != (steps,):
+                raise ValueError(f"{where}: rewards have shape {rewards.shape}, not ({steps},)")
+            rewards = rewards.astype(np.float64)
+            if not np.isfinite(rewards).all():
+                raise ValueError(f"{where}: rewards contain NaN or inf")
+        terminated = ep.terminated
+        if terminated is not None and (
+            terminated.dtype != np.bool_ or terminated.shape != (steps,)
+        ):
+            raise ValueError(
+                f"{where}: terminated must be boolean of shape ({steps},), got "
+                f"{terminated.dtype} {terminated.shape}"
+            )
+        out.append(Episode(obs, actions, rewards, terminated))
+    return out

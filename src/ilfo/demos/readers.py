@@ -55,7 +55,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ilfo.demos.npz import DemoFile, Episode
+from ilfo.demos.npz import DemoFile, Episode, checked_episodes, numeric_array
 from ilfo.demos.npz import load as _load_ilfo
 
 Format = Literal["ilfo", "imitation", "minari", "d4rl"]
@@ -197,17 +197,8 @@ def summarize(demo: DemoFile) -> dict[str, Any]:
 
 
 def read_ilfo(path: str | Path) -> DemoFile:
-    """Read ilfo's own schema-1 ``.npz`` (see :func:`ilfo.demos.load`), then check it.
-
-    Unlike ``load``, also checks actions and rewards (shapes, NaN/inf) and turns every error,
-    a corrupt compressed member included, into ValueError.
-    """
-    try:
-        demo = _load_ilfo(path)
-    except (zlib.error, TypeError, KeyError, IndexError) as err:
-        raise ValueError(f"{path} is not a readable ilfo demonstration file ({err})") from None
-    episodes = _checked(demo.episodes, Path(path))
-    return DemoFile(episodes=episodes, env_id=demo.env_id, provenance=demo.provenance)
+    """Read ilfo's own schema-1 ``.npz``: :func:`ilfo.demos.load`, which checks everything."""
+    return _load_ilfo(path)
 
 
 def read_imitation(path: str | Path) -> DemoFile:
@@ -249,7 +240,8 @@ def read_imitation(path: str | Path) -> DemoFile:
     extras: dict[str, np.ndarray] = {}
     for key, name in (("acts", "actions"), ("rews", "rewards")):
         if key in data:
-            value = _rows(data[key], key, path) if key == "acts" else _numeric(data[key], key, path)
+            read = _rows if key == "acts" else numeric_array
+            value = read(data[key], key, path)
             if value.ndim == 0 or len(value) != total_steps:
                 raise ValueError(
                     f"{path}: {key!r} has shape {value.shape}, but obs and indices make "
@@ -269,7 +261,7 @@ def read_imitation(path: str | Path) -> DemoFile:
     provenance: dict[str, Any] = {"source_format": "imitation", "source_path": str(path)}
     if skipped:
         provenance["skipped_keys"] = skipped
-    return DemoFile(episodes=_checked(episodes, path), env_id="", provenance=provenance)
+    return DemoFile(episodes=checked_episodes(episodes, path), env_id="", provenance=provenance)
 
 
 def read_minari(path: str | Path) -> DemoFile:
@@ -319,7 +311,8 @@ def read_minari(path: str | Path) -> DemoFile:
         provenance["observation_keys"] = [k for k, _ in obs_keys]
         provenance["observation_sizes"] = [d for _, d in obs_keys]
     env_id = _env_id_from_spec(meta.get("env_spec"))
-    return DemoFile(episodes=_checked(episodes, h5file), env_id=env_id, provenance=provenance)
+    episodes = checked_episodes(episodes, h5file)
+    return DemoFile(episodes=episodes, env_id=env_id, provenance=provenance)
 
 
 def read_d4rl(path: str | Path) -> DemoFile:
@@ -344,7 +337,7 @@ def read_d4rl(path: str | Path) -> DemoFile:
                 if key in f:
                     if not isinstance(f[key], h5py.Dataset):
                         raise ValueError(f"{path}: {key!r} is not an array")
-                    data[key] = _numeric(f[key][()], key, path)
+                    data[key] = numeric_array(f[key][()], key, path)
     except _H5_ERRORS as err:
         raise ValueError(f"{path} is not a readable D4RL HDF5 file ({err})") from None
     if "observations" not in data:
@@ -397,7 +390,7 @@ def read_d4rl(path: str | Path) -> DemoFile:
     }
     if dropped:
         provenance["dropped_one_step_episodes"] = dropped
-    return DemoFile(episodes=_checked(episodes, path), env_id="", provenance=provenance)
+    return DemoFile(episodes=checked_episodes(episodes, path), env_id="", provenance=provenance)
 
 
 _READERS: dict[str, Callable[[str | Path], DemoFile]] = {
@@ -447,16 +440,9 @@ def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
     return data, skipped
 
 
-def _numeric(arr: np.ndarray, name: str, path: Path) -> np.ndarray:
-    arr = np.asarray(arr)
-    if arr.dtype.kind not in "biuf":
-        raise ValueError(f"{path}: {name!r} holds {arr.dtype} data, not numbers")
-    return arr
-
-
 def _rows(arr: np.ndarray, name: str, path: Path) -> np.ndarray:
     """(n, ...) numbers as (n, d): trailing axes flattened, a 1-D array taken as (n, 1)."""
-    arr = _numeric(arr, name, path)
+    arr = numeric_array(arr, name, path)
     if arr.ndim == 0:
         raise ValueError(f"{path}: {name!r} is a scalar, not an array of rows")
     return arr.reshape(arr.shape[0], int(np.prod(arr.shape[1:], dtype=np.int64)))
@@ -552,66 +538,3 @@ def _env_id_from_spec(spec: Any) -> str:
             return ""
     env_id = spec.get("id") if isinstance(spec, dict) else None
     return env_id if isinstance(env_id, str) else ""
-
-
-def _checked(episodes: list[Episode], path: Path) -> list[Episode]:
-    """Episodes with observations (T + 1, d) as floats, actions (T, a), rewards (T,), all finite
-    and with the same d and a throughout, terminated (T,) boolean; raise ValueError naming the
-    first problem."""
-    if not episodes:
-        raise ValueError(f"{path} holds no episodes")
-    out = []
-    obs_dim = act_dim = None
-    for i, ep in enumerate(episodes):
-        where = f"{path}: episode {i}"
-        obs = _numeric(ep.observations, "observations", path)
-        if obs.ndim != 2 or len(obs) < 2:
-            raise ValueError(
-                f"{where}: observations have shape {obs.shape}, not (T + 1, d), T >= 1"
-            )
-        if obs.dtype.kind != "f":
-            obs = obs.astype(np.float64)
-        if not np.isfinite(obs).all():
-            raise ValueError(f"{where}: observations contain NaN or inf")
-        if obs_dim is None:
-            obs_dim = obs.shape[1]
-        if obs.shape[1] != obs_dim or obs_dim == 0:
-            raise ValueError(
-                f"{where}: observations have dim {obs.shape[1]}, episode 0 has {obs_dim}"
-            )
-        steps = len(obs) - 1
-        actions = ep.actions
-        if actions is not None:
-            actions = _numeric(actions, "actions", path)
-            if actions.ndim == 1:
-                actions = actions[:, None]
-            if actions.ndim != 2 or len(actions) != steps:
-                raise ValueError(f"{where}: actions have shape {actions.shape}, not ({steps}, a)")
-            if act_dim is None:
-                act_dim = actions.shape[1]
-            if actions.shape[1] != act_dim:
-                raise ValueError(
-                    f"{where}: actions have dim {actions.shape[1]}, an earlier episode {act_dim}"
-                )
-            if not np.isfinite(actions).all():
-                raise ValueError(f"{where}: actions contain NaN or inf")
-        rewards = ep.rewards
-        if rewards is not None:
-            rewards = _numeric(rewards, "rewards", path)
-            if rewards.ndim == 2 and rewards.shape[1:] == (1,):
-                rewards = rewards[:, 0]
-            if rewards.shape != (steps,):
-                raise ValueError(f"{where}: rewards have shape {rewards.shape}, not ({steps},)")
-            rewards = rewards.astype(np.float64)
-            if not np.isfinite(rewards).all():
-                raise ValueError(f"{where}: rewards contain NaN or inf")
-        terminated = ep.terminated
-        if terminated is not None and (
-            terminated.dtype != np.bool_ or terminated.shape != (steps,)
-        ):
-            raise ValueError(
-                f"{where}: terminated must be boolean of shape ({steps},), got "
-                f"{terminated.dtype} {terminated.shape}"
-            )
-        out.append(Episode(obs, actions, rewards, terminated))
-    return out

@@ -42,6 +42,7 @@ _NEWTON_BACKTRACKS = 30
 _NEWTON_RIDGE = 1e-10
 _NEWTON_MAX_STEP = 30.0
 _WARMUP = 10  # plain iterations before the first estimate: the first ones are transient
+_MAX_SCALE = 1e12  # largest |cost| / reg whose kernel float64 resolves (_check_resolution)
 
 
 def sinkhorn(
@@ -288,6 +289,7 @@ def _initial_potentials(
         # hundreds of reg; only then pay for the full c-transform below.
         f = cost.min(axis=1)
         g = np.zeros(cost.shape[1])
+        _check_resolution(f, g, reg)
         _fill_kernel(kernel, cost, f, g, reg)
         if kernel.max(axis=0).min() > np.exp(-_SLACK):
             return f, g
@@ -298,6 +300,7 @@ def _initial_potentials(
     f = np.clip(f, f_c - slack, f_c)
     g_c = (cost - f[:, None]).min(axis=0)
     g = np.clip(g, g_c - slack, g_c)
+    _check_resolution(f, g, reg)
     _fill_kernel(kernel, cost, f, g, reg)
     return f, g
 
@@ -311,6 +314,22 @@ def _fill_kernel(
     if g.any():
         out += (g / reg)[None, :]
     np.exp(out, out=out)
+
+
+def _check_resolution(f: np.ndarray, g: np.ndarray, reg: float) -> None:
+    """Refuse costs so large against ``reg`` that float64 cannot resolve the kernel.
+
+    The kernel's exponent (f_i + g_j - C_ij) / reg is a difference of terms of the size of the
+    potentials / reg, each rounded to ~1e-16 of its size: beyond _MAX_SCALE the rounding
+    alone reaches exp(+-1e-4) and, a few decades on, overflows. The potentials (row minima of
+    the cost, or a warm start near them) bound those terms at the cost of O(n + m)."""
+    scale = max(np.abs(f).max(), np.abs(g).max()) / reg
+    if scale > _MAX_SCALE:
+        raise ValueError(
+            f"costs of {scale * reg:.3g} are {scale:.3g} x reg: beyond what float64 resolves "
+            f"in the Sinkhorn kernel exp(-C / reg) (at most {_MAX_SCALE:.0e} x reg); rescale "
+            "the cost (e.g. standardise the atoms) or raise reg"
+        )
 
 
 def _in_range(x: np.ndarray) -> bool:

@@ -1,0 +1,388 @@
+"""Run directories under failure: unique names, one owner, resume after a kill at any moment,
+and a clear error (naming the file) for every damaged file a run reads."""
+
+import errno
+import json
+import os
+import struct
+import subprocess
+import sys
+import threading
+
+import jax
+import numpy as np
+import pytest
+
+from ilfo import demos
+from ilfo.cli import main
+from ilfo.rundir import (
+    FAULT_ENV,
+    RunDirInUse,
+    RunLock,
+    create_run_dir,
+    latest_checkpoint,
+)
+from ilfo.train import TrainConfig, Trainer
+from test_train import DEMOS, TINY, _metrics, _train
+
+
+def _cli_args(out, steps=600, **extra):
+    args = ["train", "--no-progress", "--out", str(out), "--steps", str(steps)]
+    for key, value in {**TINY, **extra}.items():
+        args += [f"--{key.replace('_', '-')}", str(value)]
+    return args
+
+
+# ------------------------------------------------------------------- unique, owned directories
+def test_run_dirs_created_at_the_same_moment_are_distinct(tmp_path):
+    made, barrier = [], threading.Barrier(8)
+
+    def create():
+        barrier.wait()
+        made.append(create_run_dir(tmp_path, "Hopper-v5__oops-td3__0__20261201-120000"))
+
+    threads = [threading.Thread(target=create) for _ in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(set(made)) == 8 and all(p.is_dir() for p in made)
+    assert sorted(p.name for p in made)[:2] == [
+        "Hopper-v5__oops-td3__0__20261201-120000",
+        "Hopper-v5__oops-td3__0__20261201-120000-2",
+    ]
+
+
+def test_cli_runs_started_in_the_same_second_write_their_own_directories(tmp_path, monkeypatch):
+    import ilfo.train
+
+    monkeypatch.setattr(ilfo.train, "run_name", lambda config: "same-name")
+    assert main(_cli_args(tmp_path, steps=200)) == 0
+    assert main(_cli_args(tmp_path, steps=200, oops_reg=0.1)) == 0
+    first, second = tmp_path / "same-name", tmp_path / "same-name-2"
+    assert [int(r["step"]) for r in _metrics(first)] == [100, 200]
+    assert [int(r["step"]) for r in _metrics(second)] == [100, 200]
+    assert json.loads((second / "config.json").read_text())["oops"]["reg"] == 0.1
+    assert json.loads((first / "config.json").read_text())["oops"]["reg"] == 0.05
+
+
+def test_a_run_refuses_a_directory_another_process_writes(tmp_path):
+    run = _train(tmp_path, "run", steps=200)
+    before = (run / "config.json").read_bytes(), _metrics(run)
+    with RunLock(run):  # as another process resuming it would hold it
+        with pytest.raises(RunDirInUse, match="in use by another run"):
+            Trainer.resume(run, progress=False, steps=400)
+        config = TrainConfig(**{**TINY, "steps": 200})
+        with pytest.raises(RunDirInUse):
+            Trainer(config, run, progress=False).train()
+    assert ((run / "config.json").read_bytes(), _metrics(run)) == before
+    # Unlocked, a fresh run still may not write into a directory that holds a run.
+    with pytest.raises(ValueError, match="holds a run already"):
+        Trainer(TrainConfig(**{**TINY, "steps": 200}), run, progress=False).train()
+    assert Trainer.resume(run, progress=False, steps=300).train() == run  # the lock was freed
+
+
+# ----------------------------------------------------------------------------------- resume
+def test_resume_finds_the_newest_complete_checkpoint_and_removes_leftovers(tmp_path):
+    full = _metrics(_train(tmp_path, "full", steps=400))
+    run = _train(tmp_path, "run", steps=300, checkpoint_every=100)
+    root = run / "checkpoints"
+    assert [p.name for p in root.iterdir()] == ["step_000000300"]  # older ones removed
+    # What kills at other moments leave: a half-written checkpoint, a stale pointer of an older
+    # ilfo, an older checkpoint not yet removed, and an incomplete directory.
+    (root / ".tmp_step_000000400").mkdir()
+    (root / ".tmp_step_000000400" / "agent.msgpack").write_bytes(b"\x00" * 10)
+    (root / "latest").write_text("step_000000100")
+    (root / "step_000000350").mkdir()  # no state.json: not a checkpoint
+    assert latest_checkpoint(run).name == "step_000000300"
+    trainer = Trainer.resume(run, progress=False, steps=400)
+    assert trainer.step == 300
+    assert not (root / ".tmp_step_000000400").exists() and not (root / "latest").exists()
+    assert _metrics(trainer.train()) == full
+
+
+def test_a_run_killed_before_its_first_checkpoint_starts_again_from_zero(tmp_path):
+    full = _metrics(_train(tmp_path, "full", steps=300))
+    run = tmp_path / "run"
+    trainer = Trainer(TrainConfig(**{**TINY, "steps": 300}), run, progress=False)
+    trainer.save_checkpoint = lambda: None  # every checkpoint "lost"
+    trainer.train()
+    assert latest_checkpoint(run) is None and _metrics(run)
+    with pytest.warns(UserWarning, match="starts again from step 0"):
+        resumed = Trainer.resume(run, progress=False)
+    assert resumed.step == 0 and _metrics(run) == []
+    assert _metrics(resumed.train()) == full
+
+
+def test_checkpoints_follow_the_clock_as_well_as_the_steps(tmp_path, monkeypatch):
+    saved = []
+    original = Trainer.save_checkpoint
+
+    def record(self):
+        saved.append(self.step)
+        return original(self)
+
+    monkeypatch.setattr(Trainer, "save_checkpoint", record)
+    huge = 10**9
+    _train(tmp_path, "clock", steps=300, checkpoint_every=huge, checkpoint_minutes=1e-9)
+    assert saved == [100, 200, 300]  # each episode took longer than the clock's interval
+    saved.clear()
+    _train(tmp_path, "steps_only", steps=300, checkpoint_every=huge, checkpoint_minutes=0)
+    assert saved == [300]  # the end of the run only
+    assert TrainConfig().checkpoint_minutes == 10.0
+    plan = Trainer(TrainConfig(**TINY), tmp_path / "p", progress=False).checkpoint_plan()
+    assert "every 200 steps and every 10 min" in plan and str(tmp_path / "p") in plan
+    for bad in (-1, float("nan"), "10", True):
+        with pytest.raises(ValueError, match="checkpoint_minutes"):
+            TrainConfig(**{**TINY, "checkpoint_minutes": bad})
+
+
+def test_resume_with_steps_writes_config_only_after_loading_and_refuses_to_shorten(tmp_path):
+    run = _train(tmp_path, "run", steps=300)
+    config_bytes = (run / "config.json").read_bytes()
+    with pytest.raises(ValueError, match="has done 300 steps already"):
+        Trainer.resume(run, progress=False, steps=200)
+    agent = latest_checkpoint(run) / "agent.msgpack"
+    good = agent.read_bytes()
+    agent.write_bytes(good[: len(good) // 2])  # truncated
+    with pytest.raises(ValueError, match=r"agent\.msgpack is not a readable agent checkpoint"):
+        Trainer.resume(run, progress=False, steps=400)
+    assert (run / "config.json").read_bytes() == config_bytes  # neither call touched it
+    agent.write_bytes(good)
+    assert Trainer.resume(run, progress=False, steps=300).step == 300  # equal: nothing to do
+
+
+# -------------------------------------------------------------------- kills at named moments
+def _tensorboard_steps(run_dir, tag="proxy_return"):
+    """Steps of ``tag`` in a run's TensorBoard events as TensorBoard shows them: a session start
+    at step S (a writer opened with purge_step S) hides the events at S and after."""
+    from tensorboardX.proto import event_pb2
+
+    steps = []
+    for path in sorted((run_dir / "tb").glob("events.out.tfevents.*")):
+        data = path.read_bytes()
+        pos = 0
+        while pos + 12 <= len(data):
+            (length,) = struct.unpack("<Q", data[pos : pos + 8])
+            event = event_pb2.Event.FromString(data[pos + 12 : pos + 12 + length])
+            pos += 12 + length + 4
+            if event.HasField("session_log") and event.session_log.status == 1:
+                steps = [s for s in steps if s < event.step]
+            steps += [event.step for v in event.summary.value if v.tag == tag]
+    return steps
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    return _metrics(_train(tmp_path_factory.mktemp("reference"), "full"))
+
+
+@pytest.mark.parametrize(
+    "fault",
+    [
+        "checkpoint_before_cleanup:1",  # the first checkpoint renamed, nothing after it
+        "episode_end:3",  # rows logged after the last checkpoint
+        pytest.param("checkpoint_before_rename:2", marks=pytest.mark.slow),
+        pytest.param("checkpoint_before_cleanup:2", marks=pytest.mark.slow),
+        pytest.param("episode_end:6", marks=pytest.mark.slow),  # the last row, unsaved
+    ],
+)
+def test_a_run_killed_at_any_moment_resumes_to_the_uninterrupted_numbers(
+    tmp_path, fault, uninterrupted
+):
+    env = {
+        **os.environ,
+        FAULT_ENV: fault,
+        "ILFO_COMPILATION_CACHE": jax.config.jax_compilation_cache_dir,  # the session's
+    }
+    argv = [sys.executable, "-m", "ilfo.cli", *_cli_args(tmp_path / "runs")]
+    done = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == -9, done.stderr  # SIGKILL, as an OOM kill or a crash
+    (run,) = list((tmp_path / "runs").iterdir())
+    trainer = Trainer.resume(run, progress=False)
+    assert _metrics(trainer.train()) == uninterrupted
+    assert _tensorboard_steps(run) == [int(r["step"]) for r in uninterrupted]
+
+
+# ------------------------------------------------------------------ clear errors, never tracebacks
+def _cli_error(capsys, argv, code=2):
+    assert main(argv) == code
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert err.startswith("ilfo: error: ")
+    return err
+
+
+def test_damaged_run_files_are_clear_errors_that_name_the_file(tmp_path, capsys):
+    run = _train(tmp_path, "run", steps=200)
+    config, policy = run / "config.json", run / "policy.msgpack"
+    good_config, good_policy = config.read_bytes(), policy.read_bytes()
+
+    policy.write_bytes(good_policy[:100])
+    assert "policy.msgpack is not a readable policy" in _cli_error(capsys, ["eval", str(run)])
+    policy.write_bytes(os.urandom(2000))
+    assert str(policy) in _cli_error(capsys, ["eval", str(run)])
+    policy.write_bytes(good_policy)
+
+    for damaged, message in [
+        (good_config[: len(good_config) // 2], "is not valid JSON"),
+        (b"\xff\xfe" + good_config, "is not UTF-8"),
+        (
+            json.dumps({**json.loads(good_config), "bogus": 1}).encode(),
+            "unknown setting(s) 'bogus'",
+        ),
+        (json.dumps({**json.loads(good_config), "steps": "many"}).encode(), "steps must be an"),
+        (b"[1, 2]", "must hold a JSON object"),
+    ]:
+        config.write_bytes(damaged)
+        for argv in (["eval", str(run)], ["train", "--resume", str(run)]):
+            err = _cli_error(capsys, argv)
+            assert str(config) in err and message in err, err
+    # The env's or the networks' sizes changed under a checkpoint: named, not a JAX shape error.
+    changed = json.loads(good_config)
+    changed["td3"]["critic_hidden"] = [32, 32]
+    config.write_text(json.dumps(changed))
+    err = _cli_error(capsys, ["train", "--resume", str(run), "--steps", "300"])
+    assert "agent.msgpack" in err and "network sizes changed" in err
+    config.write_bytes(good_config)
+
+    replay = latest_checkpoint(run) / "replay.npz"
+    replay.write_bytes(os.urandom(500))
+    err = _cli_error(capsys, ["train", "--resume", str(run), "--steps", "300"])
+    assert "replay.npz is not a replay buffer file" in err and "allow_pickle" not in err
+
+
+def test_an_unwritable_out_is_one_line(tmp_path, capsys):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    err = _cli_error(capsys, _cli_args(blocker / "runs", steps=200), code=1)
+    assert str(blocker) in err
+
+
+def test_a_full_disk_during_a_checkpoint_is_one_line_and_keeps_what_was_written(
+    tmp_path, capsys, monkeypatch
+):
+    from ilfo.replay import ReplayBuffer
+
+    full = _metrics(_train(tmp_path, "full", steps=600))
+    original, calls = ReplayBuffer.save, []
+
+    def save(self, path):
+        calls.append(path)
+        if len(calls) == 2:
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        original(self, path)
+
+    monkeypatch.setattr(ReplayBuffer, "save", save)
+    err = _cli_error(capsys, _cli_args(tmp_path / "runs"), code=1)
+    assert "No space left on device" in err and "replay.npz" in err
+    monkeypatch.setattr(ReplayBuffer, "save", original)
+    (run,) = list((tmp_path / "runs").iterdir())
+    assert latest_checkpoint(run).name == "step_000000200"
+    assert _metrics(Trainer.resume(run, progress=False).train()) == full
+
+
+def test_the_resume_hint_is_a_command_the_user_can_run(monkeypatch, tmp_path):
+    import shutil
+
+    from ilfo import cli
+
+    venv_ilfo = str(tmp_path / ".venv" / "bin" / "ilfo")
+    monkeypatch.setattr(sys, "argv", [venv_ilfo, "train"])
+    monkeypatch.setattr(shutil, "which", lambda name: None)  # the venv is not activated
+    assert cli._command() == venv_ilfo
+    monkeypatch.setattr(shutil, "which", lambda name: venv_ilfo)  # it is
+    assert cli._command() == "ilfo"
+    monkeypatch.setattr(sys, "argv", ["-c"])
+    assert cli._command() == f"{sys.executable} -m ilfo.cli"
+
+
+# --------------------------------------------------------------------------- bad demo files
+def _demo_corpus(tmp_path):
+    """(name, path) of bad demonstration files, each a different way of being wrong."""
+    good = demos.load(DEMOS)
+    valid = tmp_path / "valid.npz"
+    demos.save(valid, good.episodes[:2], "Hopper-v5")
+    obs = np.concatenate([e.observations for e in good.episodes[:2]])
+    lengths = np.array([len(e.observations) for e in good.episodes[:2]])
+    steps = int(lengths.sum() - len(lengths))
+    base = {
+        "schema_version": np.array(1),
+        "env_id": np.array("Hopper-v5"),
+        "provenance": np.array("{}"),
+        "episode_lengths": lengths,
+        "observations": obs,
+        "actions": np.zeros((steps, 3)),
+        "rewards": np.ones(steps),
+    }
+    variants = {
+        "nan_observations": {
+            "observations": np.where(np.arange(len(obs))[:, None] == 5, np.nan, obs)
+        },
+        "inf_observations": {"observations": np.where(obs > 1.0, np.inf, obs)},
+        "nan_rewards": {"rewards": np.where(np.arange(steps) == 7, np.nan, 1.0)},
+        "inf_actions": {"actions": np.full((steps, 3), np.inf)},
+        "string_observations": {"observations": obs.astype(str)},
+        "bool_terminated_wrong_dtype": {"terminated": np.zeros(steps, dtype=np.int8)},
+        "observations_3d": {"observations": obs[:, :, None]},
+        "lengths_do_not_add_up": {"episode_lengths": lengths + 1},
+        "zero_length_episode": {"episode_lengths": np.array([1, len(obs) - 1])},
+        "no_episodes": {"episode_lengths": np.array([], dtype=np.int64)},
+        "float_lengths": {"episode_lengths": lengths.astype(float)},
+        "rewards_too_short": {"rewards": np.ones(steps - 1)},
+        "actions_scalar": {"actions": np.array(1.0)},
+        "pickled_objects": {"observations": np.array([object()] * len(obs), dtype=object)},
+        "bad_schema": {"schema_version": np.array("one")},
+        "bad_provenance": {"provenance": np.array("{not json")},
+    }
+    corpus = []
+    for name, change in variants.items():
+        path = tmp_path / f"{name}.npz"
+        np.savez(path, **{**base, **change})
+        corpus.append((name, path))
+    data = valid.read_bytes()
+    for fraction in (0.1, 0.5, 0.9, 0.999):
+        path = tmp_path / f"truncated_{fraction}.npz"
+        path.write_bytes(data[: int(len(data) * fraction)])
+        corpus.append((f"truncated_{fraction}", path))
+    rng = np.random.default_rng(0)
+    for k in range(4):  # random bytes, and a zip header on random bytes
+        path = tmp_path / f"garbage_{k}.npz"
+        path.write_bytes((b"PK\x03\x04" if k % 2 else b"") + rng.bytes(3000))
+        corpus.append((f"garbage_{k}", path))
+    return valid, corpus
+
+
+def test_every_bad_demo_file_is_a_clear_error_on_every_path(tmp_path, capsys):
+    from ilfo.train import load_demos
+
+    valid, corpus = _demo_corpus(tmp_path)
+    assert len(demos.load(valid).episodes) == 2
+    for name, path in corpus:
+        for read in (demos.load, demos.load_any):
+            with pytest.raises(ValueError) as caught:
+                read(path)
+            assert str(path) in str(caught.value), name
+            assert "allow_pickle" not in str(caught.value), name
+        with pytest.raises(ValueError, match=str(path)):  # ilfo train's path
+            load_demos(TrainConfig(**{**TINY, "demos": str(path)}))
+        err = _cli_error(capsys, ["demos", "info", str(path)])
+        assert str(path) in err, name
+    with pytest.raises(ValueError, match="holds demos of Hopper-v5, not Walker2d-v5"):
+        load_demos(TrainConfig(**{**TINY, "demos": str(valid), "env": "Walker2d-v5"}))
+
+
+def test_sinkhorn_refuses_costs_beyond_float64_instead_of_returning_nan():
+    from ilfo.ot import cost_matrix, sinkhorn
+
+    rng = np.random.default_rng(0)
+    cost = cost_matrix(rng.normal(size=(30, 3)), rng.normal(size=(20, 3)))
+    for scale in (1e20, 1e100, 1e300):
+        with pytest.raises(ValueError, match="beyond what float64 resolves"):
+            sinkhorn(cost * scale)
+        with pytest.raises(ValueError, match="beyond what float64 resolves"):
+            sinkhorn(cost * scale, init=sinkhorn(cost).potentials)
+    with pytest.raises(ValueError, match="beyond what float64 resolves"):
+        sinkhorn(cost + 1e20)  # a huge offset: the same plan in exact arithmetic, not in float64
+    large = sinkhorn(cost * 1e3, max_iter=50)  # large but resolvable: a result, maybe unconverged
+    assert np.isfinite(large.plan).all() and np.isfinite(large.cost)
