@@ -25,7 +25,15 @@ import numpy as np
 # Keep this folder off the path: bench/ot.py would shadow POT's `ot`.
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 from ilfo.benchmarking import machine
-from ilfo.train import Agent, Trainer, rollout_policy, with_time
+from ilfo.training import (
+    Agent,
+    agent_observations,
+    load_demo_set,
+    load_run_policy,
+    make_envs,
+    make_reward,
+    rollout_policy,
+)
 
 PROBE_STEPS = (0, 50, 100, 200, 400, 700, 900, 990)
 
@@ -56,22 +64,23 @@ def main() -> None:
     if args.episodes < 1:
         parser.error(f"--episodes must be >= 1, got {args.episodes}")
 
-    trainer = Trainer.from_checkpoint(args.run_dir, progress=False, with_replay=False)
-    agent, state, horizon = trainer.agent, trainer.state, trainer.horizon
+    run = load_run_policy(args.run_dir, "latest")  # the whole agent state: critics too
+    assert run.checkpoint is not None
+    agent, state, horizon = run.agent, run.checkpoint.agent_state, run.env.horizon
+    _, eval_env, _ = make_envs(run.config)
+    reward = make_reward(run.config, load_demo_set(run.config, run.env.obs_dim).observations)
     gamma = agent.functions.config.gamma
     meta = {
         "run": str(args.run_dir),
-        "step": trainer.step,
+        "step": run.checkpoint.step,
         "date": date.today().isoformat(),
         "machine": machine(),
     }
     for k in range(args.episodes):
-        rollout = rollout_policy(trainer.eval_env, agent, state, horizon, seed=args.first_seed + k)
-        obs = rollout.observations[:-1]
-        if agent.time_feature:
-            obs = with_time(obs, horizon)
-        if trainer.rewarder is not None:
-            rewards = np.asarray(trainer.rewarder(rollout.observations).rewards)
+        rollout = rollout_policy(eval_env, agent, state, horizon, seed=args.first_seed + k)
+        obs = agent_observations(rollout.observations[:-1], horizon, agent.time_feature)
+        if reward is not None:
+            rewards = np.asarray(reward(rollout.observations).rewards)
         else:
             rewards = rollout.rewards
         g = return_to_go(rewards, gamma)
@@ -97,7 +106,9 @@ def main() -> None:
         if args.json:
             print(json.dumps(row))
             continue
-        print(f"{args.run_dir} at step {trainer.step}, episode {k}: reward {rewards.sum():.0f}")
+        print(
+            f"{args.run_dir} at step {run.checkpoint.step}, episode {k}: reward {rewards.sum():.0f}"
+        )
         print(
             "      t        Q      G_t"
             + ("   Q(k=1)      r_t  Q(k=H)" if agent.time_feature else "")

@@ -25,9 +25,8 @@ sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).re
 from ilfo import demos as demo_io
 from ilfo.benchmarking import machine
 from ilfo.envs import HEALTHY_ANGLE_ENVS, episode_scores, make_env
-from ilfo.evaluate import load_run_policy
 from ilfo.experts import load_expert
-from ilfo.train import default_demos_path, rollout_policy
+from ilfo.training import default_demos_path, load_run_policy, rollout_policy
 
 
 def health_report(env: Any, observations: np.ndarray) -> dict[str, float]:
@@ -65,18 +64,19 @@ def main() -> None:
         own_demos = Path(args.expert) / "demos.npz"
         demo_path = own_demos if own_demos.is_file() else default_demos_path(env_id)
     else:
-        trainer, state, which = load_run_policy(Path(args.run_dir), args.best)
+        run = load_run_policy(Path(args.run_dir), "best" if args.best else "final")
+        which = run.source
         if args.best:
             info = json.loads((Path(args.run_dir) / "best_policy.json").read_text())
             which += f" (step {info['step']})"
-        env_id, label = trainer.config.env, f"{args.run_dir}, {which}"
+        env_id, label = run.config.env, f"{args.run_dir}, {which}"
         # The env's own health ranges: the paper's score, whatever the run trained with.
-        run_env = make_env(env_id, True, horizon=trainer.horizon)
+        run_env = make_env(env_id, True, horizon=run.env.horizon)
 
         def rollout(seed: int):
-            return rollout_policy(run_env, trainer.agent, state, trainer.horizon, seed=seed)
+            return rollout_policy(run_env, run.agent, run.policy, run.env.horizon, seed=seed)
 
-        demo_path = Path(trainer.config.demos or default_demos_path(env_id))
+        demo_path = Path(run.config.demos or default_demos_path(env_id))
     if env_id not in HEALTHY_ANGLE_ENVS:
         raise SystemExit(f"{env_id}: only {', '.join(HEALTHY_ANGLE_ENVS)} have these conditions")
 

@@ -25,7 +25,7 @@ import numpy as np
 # Keep this folder off the path: bench/ot.py would shadow POT's `ot`.
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 from ilfo.benchmarking import machine
-from ilfo.train import TrainConfig, Trainer, plot_runs, read_metrics
+from ilfo.training import TrainConfig, Trainer, plot_runs, read_metrics
 
 
 def run_seed(config: TrainConfig, run_dir: Path) -> Path:

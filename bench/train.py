@@ -3,16 +3,14 @@ update-only rate: where does a step's time go?
 
 A short ``Trainer`` run (fast preset by default; Hopper-v5; the bundled scripted demos, the
 first one imitated; ``--steps`` 20,000 of which ``--start-steps`` 10,000 random; evaluation and
-checkpoints pushed past the end of the run) with its pieces wrapped in timers, without touching
-``src/``:
+checkpoints pushed past the end of the run) timed through the loop's ``LoopHooks`` (its
+``timed`` pieces):
 
 - ``env``: ``trainer.env.step``;
-- ``act``: ``agent.act`` (the policy's forward pass, blocked on its result, which the loop
-  does anyway with ``np.asarray``);
-- ``reward``: ``trainer.rewarder(observations)``, the OT reward of an episode;
-- ``replay``: ``trainer.buffer.add_episode`` (blocked until the scatter is done);
-- ``update``: ``agent.update`` (every chunk, blocked on its result, which the loop does anyway
-  by reading the metrics);
+- ``act``: the policy's forward pass and exploration noise, synchronised (``np.asarray``);
+- ``reward``: the episode reward of an episode (the OT solve);
+- ``replay``: ``trainer.buffer.add_episode`` (the hook waits until the scatter is done);
+- ``update``: the episode's agent updates (every chunk, synchronised by reading the metrics);
 - ``other``: the rest of the learning phase's wall time (the Python loop around ``env.step``:
   per-step PRNG key folding and list appends, time features, metrics.csv, the progress bar).
 
@@ -45,7 +43,8 @@ import sys
 import tempfile
 import time
 from collections import defaultdict
-from collections.abc import Callable
+from collections.abc import Iterator
+from contextlib import contextmanager
 from datetime import date
 from pathlib import Path
 from typing import Any
@@ -58,84 +57,62 @@ sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).re
 from ilfo.agents import policy_of
 from ilfo.benchmarking import machine
 from ilfo.paths import bundled_demos
-from ilfo.train import TrainConfig, Trainer
+from ilfo.training import LoopHooks, TrainConfig, Trainer
 
 PIECES = ("env", "act", "reward", "replay", "update", "other")
 
 
-class Timers:
-    """Accumulated seconds and call counts per piece; only counted while ``active``."""
+class TimingHooks(LoopHooks):
+    """Times the loop's pieces through its hooks (``Trainer(hooks=...)``); counts only the
+    learning phase, and records each learning episode's span and Sinkhorn solve."""
 
     def __init__(self) -> None:
         self.seconds: dict[str, float] = defaultdict(float)
         self.calls: dict[str, int] = defaultdict(int)
-        self.active = False
-
-    def wrap(self, name: str, fn: Callable[..., Any], block: bool = False) -> Callable[..., Any]:
-        def timed(*args: Any, **kwargs: Any) -> Any:
-            start = time.perf_counter()
-            out = fn(*args, **kwargs)
-            if block:
-                jax.block_until_ready(out)
-            if self.active:
-                self.seconds[name] += time.perf_counter() - start
-                self.calls[name] += 1
-            return out
-
-        return timed
-
-
-class TimedRewarder:
-    """Proxy of the rewarder whose calls are timed (``__call__`` is looked up on the type)."""
-
-    def __init__(self, inner: Any, timed_call: Callable[..., Any], timers: Timers) -> None:
-        self._inner = inner
-        self._call = timed_call
-        self._timers = timers
+        self.episodes: list[dict[str, Any]] = []
         self.solves: list[tuple[int | None, bool]] = []
         """(iterations, converged) of each learning-phase episode's OT solve."""
+        self.active = False
+        self._trainer: Trainer | None = None
 
-    def __call__(self, observations: np.ndarray) -> Any:
-        out = self._call(observations)
-        coupling = getattr(out, "coupling", None)
-        if self._timers.active and coupling is not None:
-            self.solves.append((coupling.iterations, bool(coupling.converged)))
-        return out
+    @contextmanager
+    def timed(self, piece: str) -> Iterator[None]:
+        start = time.perf_counter()
+        yield
+        if piece == "replay" and self._trainer is not None:
+            # The write is an async jitted scatter: count the wait for it, not its dispatch.
+            jax.block_until_ready(self._trainer.buffer.data)
+        if self.active:
+            self.seconds[piece] += time.perf_counter() - start
+            self.calls[piece] += 1
 
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._inner, name)
+    def episode_started(self, trainer: Trainer) -> None:
+        self._trainer = trainer
+        self.active = trainer.step >= trainer.config.start_steps
+        self._start = time.perf_counter()
+
+    def episode_rewarded(self, trainer: Trainer, output: Any) -> None:
+        if self.active:
+            self.solves.append((output.coupling.iterations, bool(output.coupling.converged)))
+
+    def episode_ended(self, trainer: Trainer, row: dict[str, Any]) -> None:
+        # The row is written: the span covers the loop's bookkeeping (metrics) too.
+        steps = row["step"] - (self.episodes[-1]["step"] if self.episodes else 0)
+        self.episodes.append(
+            {
+                "learning": self.active,
+                "start": self._start,
+                "end": time.perf_counter(),
+                "steps": steps,
+                "step": row["step"],
+            }
+        )
+        self.active = False
 
 
 def update_chunks(num_updates: int) -> list[int]:
     """The power-of-two chunks ``Trainer._update`` splits ``num_updates`` into."""
     return [1 << b for b in range(num_updates.bit_length() - 1, -1, -1) if num_updates >> b & 1]
-
-
-def instrument(trainer: Trainer, timers: Timers) -> None:
-    """Wrap the trainer's pieces in timers (instance attributes only; src/ is untouched)."""
-    funcs = trainer.agent.functions
-    trainer.env.step = timers.wrap("env", trainer.env.step)
-    trainer.rewarder = TimedRewarder(
-        trainer.rewarder, timers.wrap("reward", trainer.rewarder), timers
-    )
-    buffer = trainer.buffer
-
-    def add_episode_blocking(*args: Any, **kwargs: Any) -> int:
-        # The write is an async jitted scatter: count the wait for it, not only its dispatch.
-        start = time.perf_counter()
-        out = type(buffer).add_episode(buffer, *args, **kwargs)
-        jax.block_until_ready(buffer.data)
-        if timers.active:
-            timers.seconds["replay"] += time.perf_counter() - start
-            timers.calls["replay"] += 1
-        return out
-
-    buffer.add_episode = add_episode_blocking
-    timed_funcs = funcs._replace(
-        act=timers.wrap("act", funcs.act, block=True),
-        update=timers.wrap("update", funcs.update, block=True),
-    )
-    trainer.agent = trainer.agent._replace(functions=timed_funcs)
 
 
 def precompile(trainer: Trainer) -> float:
@@ -168,8 +145,7 @@ def update_only(trainer: Trainer, num_updates: int, repeat: int) -> float:
 
 
 def run(args: argparse.Namespace) -> tuple[dict, list[dict]]:
-    timers = Timers()
-    episodes: list[dict] = []
+    hooks = TimingHooks()
     with tempfile.TemporaryDirectory(prefix="ilfo-bench-train-") as tmp:
         config = TrainConfig(
             env="Hopper-v5",
@@ -182,32 +158,17 @@ def run(args: argparse.Namespace) -> tuple[dict, list[dict]]:
             seed=args.seed,
             eval_every=10 * args.steps,
             checkpoint_every=10 * args.steps,
+            checkpoint_minutes=0,
             out=tmp,
             updates_per_step=args.updates_per_step,
         )
-        trainer = Trainer(config, Path(tmp) / "run", progress=False)
+        trainer = Trainer(config, Path(tmp) / "run", progress=False, hooks=hooks)
         compile_s = precompile(trainer)
-        instrument(trainer, timers)
-        inner_episode = trainer._episode
-
-        def episode() -> dict[str, Any]:
-            learning = trainer.step >= config.start_steps
-            timers.active = learning
-            start = time.perf_counter()
-            row = inner_episode()
-            end = time.perf_counter()
-            timers.active = False
-            episodes.append(
-                {"learning": learning, "start": start, "end": end, "steps": row["_steps"]}
-            )
-            return row
-
-        trainer._episode = episode
         start = time.perf_counter()
         trainer.train()
         total_s = time.perf_counter() - start
         ups = update_only(trainer, args.update_only, args.repeat)
-        solves = trainer.rewarder.solves
+    episodes, solves = hooks.episodes, hooks.solves
 
     learn = [e for e in episodes if e["learning"]]
     if not learn:
@@ -217,7 +178,7 @@ def run(args: argparse.Namespace) -> tuple[dict, list[dict]]:
     # loop's bookkeeping between episodes (metrics.csv, progress bar), not the final checkpoint.
     wall = learn[-1]["end"] - learn[0]["start"]
     steps = sum(e["steps"] for e in learn)
-    seconds = dict(timers.seconds)
+    seconds = dict(hooks.seconds)
     seconds["other"] = wall - sum(seconds.get(p, 0.0) for p in PIECES if p != "other")
     summary = {
         "bench": "train_loop",
@@ -256,7 +217,7 @@ def run(args: argparse.Namespace) -> tuple[dict, list[dict]]:
                 "preset": config.preset,
                 "piece": piece,
                 "seconds": round(s, 4),
-                "calls": timers.calls.get(piece),
+                "calls": hooks.calls.get(piece),
                 "us_per_step": round(1e6 * s / steps, 2),
                 "share": round(s / wall, 4),
             }

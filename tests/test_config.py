@@ -10,7 +10,7 @@ from ilfo.agents import SACConfig, TD3Config, ddpg_config
 from ilfo.cli import main
 from ilfo.config import add_dataclass_arguments, none_or, overrides_from_args
 from ilfo.rewards import OOPSConfig, PWILConfig
-from ilfo.train import TrainConfig
+from ilfo.training import TrainConfig
 
 
 def test_help_lists_every_agent_and_rewarder_flag_with_its_doc(capsys):
@@ -115,8 +115,8 @@ def test_resolved_config_builds_the_same_agent_and_rewarder():
             config = TrainConfig(algo=algo, preset=preset, seed=2)
             resolved = _round_trip(config.resolved(100))
             assert resolved.agent_config(100) == config.agent_config(100)
-            assert resolved.resolved_oops() == config.resolved_oops()
-            assert resolved.resolved_pwil() == config.resolved_pwil()
+            assert resolved.part_config("oops") == config.part_config("oops")
+            assert resolved.part_config("pwil") == config.part_config("pwil")
             assert resolved.resolved(100) == resolved  # idempotent
 
 
@@ -131,9 +131,9 @@ def test_default_agent_and_rewarder_configs_are_the_presets():
     assert not TrainConfig(algo="td3").agent_config(1000).time_augmentation
     assert TrainConfig(algo="td3", fixed_horizon=True).agent_config(1000).time_augmentation
     assert TrainConfig(algo="sac").agent_config(1000) == SACConfig()
-    assert TrainConfig(seed=4).resolved_oops() == OOPSConfig(seed=4)
+    assert TrainConfig(seed=4).part_config("oops") == OOPSConfig(seed=4)
     # An explicit OOPS config keeps its settings, but the run's seed seeds it.
-    assert TrainConfig(seed=4, oops=OOPSConfig(reg=0.2)).resolved_oops().seed == 4
+    assert TrainConfig(seed=4, oops=OOPSConfig(reg=0.2)).part_config("oops").seed == 4
     # Explicit time augmentation off stays off; the trainer sets max_time.
     custom = TrainConfig(td3=TD3Config(time_augmentation=False, max_time=7)).agent_config(50)
     assert not custom.time_augmentation and custom.max_time == 50
@@ -152,3 +152,21 @@ def test_mismatched_or_malformed_sub_configs_are_clear_errors():
         TrainConfig(td3={"batch": 3})
     with pytest.raises(TypeError, match="td3 must be a TD3Config"):
         TrainConfig(td3=3)
+
+
+def test_the_algo_names_are_the_registry():
+    from typing import get_args
+
+    from ilfo.algos import ALGOS, PART_CONFIGS, algos_using
+    from ilfo.training import Algo
+
+    assert list(get_args(Algo)) == list(ALGOS)
+    for name, recipe in ALGOS.items():
+        config = TrainConfig(algo=name)
+        assert config.imitation == (recipe.reward is not None)
+        resolved = config.resolved(100)
+        used = {recipe.agent, recipe.reward} - {None}
+        assert {part for part in PART_CONFIGS if getattr(resolved, part) is not None} == used
+    assert algos_using("pwil") == ["pwil-td3"]
+    with pytest.raises(ValueError, match="unknown algo 'gail'; choose one of oops-td3"):
+        TrainConfig(algo="gail")

@@ -15,7 +15,7 @@ from ilfo.experts import (
     load_expert,
     write_card,
 )
-from ilfo.train import TrainConfig, Trainer, read_metrics
+from ilfo.training import TrainConfig, Trainer, read_metrics
 
 TINY_SAC = TrainConfig(
     algo="sac",

@@ -15,14 +15,14 @@ import pytest
 
 from ilfo import demos
 from ilfo.cli import main
-from ilfo.rundir import (
+from ilfo.training import TrainConfig, Trainer
+from ilfo.training.run_dir import (
     FAULT_ENV,
     RunDirInUse,
     RunLock,
     create_run_dir,
     latest_checkpoint,
 )
-from ilfo.train import TrainConfig, Trainer
 from test_train import DEMOS, TINY, _metrics, _train
 
 
@@ -54,9 +54,9 @@ def test_run_dirs_created_at_the_same_moment_are_distinct(tmp_path):
 
 
 def test_cli_runs_started_in_the_same_second_write_their_own_directories(tmp_path, monkeypatch):
-    import ilfo.train
+    import ilfo.training
 
-    monkeypatch.setattr(ilfo.train, "run_name", lambda config: "same-name")
+    monkeypatch.setattr(ilfo.training, "run_name", lambda config: "same-name")
     assert main(_cli_args(tmp_path, steps=200)) == 0
     assert main(_cli_args(tmp_path, steps=200, oops_reg=0.1)) == 0
     first, second = tmp_path / "same-name", tmp_path / "same-name-2"
@@ -354,7 +354,7 @@ def _demo_corpus(tmp_path):
 
 
 def test_every_bad_demo_file_is_a_clear_error_on_every_path(tmp_path, capsys):
-    from ilfo.train import load_demos
+    from ilfo.training import load_demos
 
     valid, corpus = _demo_corpus(tmp_path)
     assert len(demos.load(valid).episodes) == 2

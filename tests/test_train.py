@@ -9,8 +9,8 @@ import pytest
 
 from ilfo.cli import main
 from ilfo.paths import bundled_demos
-from ilfo.rundir import latest_checkpoint
-from ilfo.train import TrainConfig, Trainer, load_demos
+from ilfo.training import TrainConfig, Trainer, load_demos
+from ilfo.training.run_dir import latest_checkpoint
 
 DEMOS = str(bundled_demos("Hopper-v5-scripted"))
 TINY = dict(
@@ -70,7 +70,7 @@ def test_resume_with_oops_warm_starts_equals_uninterrupted(tmp_path):
     warm = {"oops": {"warm_start": True, "tol": 1e-6}, "steps": 400}
     full = _metrics(_train(tmp_path, "full", **warm))
     run = _train(tmp_path, "resumed", **{**warm, "steps": 300})
-    assert (run / "checkpoints" / "step_000000300" / "rewarder_potentials.npz").is_file()
+    assert (run / "checkpoints" / "step_000000300" / "reward_arrays.npz").is_file()
     assert _metrics(Trainer.resume(run, progress=False, steps=400).train()) == full
 
 
@@ -228,7 +228,7 @@ def test_ctrl_c_mid_episode_finishes_the_episode_checkpoints_and_resumes_exactly
 def test_network_normalizer_weighs_expert_and_random_states_alike_as_the_paper_code():
     import numpy as np
 
-    from ilfo.train import network_normalizer
+    from ilfo.training import network_normalizer
 
     rng = np.random.default_rng(0)
     random_states = rng.normal(0.0, 0.1, (1000, 3))

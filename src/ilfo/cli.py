@@ -69,31 +69,10 @@ def _show_warning(
     print(f"ilfo: warning: {message}", file=sys.stderr if file is None else file)
 
 
-# The agent and rewarder groups of `ilfo train`: config field -> (flags set by the trainer, group
-# title's description, group description).
-_TRAIN_GROUPS: dict[str, tuple[tuple[str, ...], str, str]] = {
-    "td3": (
-        ("max_time",),
-        "TD3/DDPG agent",
-        "Defaults: the --preset's (paper | fast, shown as 'paper X, fast Y' where they differ); "
-        "a flag here changes that one setting of the preset. oops-ddpg then applies DDPG's "
-        "changes (one critic, no target smoothing, policy delay 1). Set by the trainer: "
-        "max_time (the episode horizon); time augmentation applies only where observations "
-        "carry the time feature (fixed-horizon runs).",
-    ),
-    "sac": ((), "SAC agent", "Defaults: Haarnoja et al. 2018."),
-    "oops": (
-        ("seed",),
-        "OOPS rewarder",
-        "Defaults: the paper's. Set by the trainer: seed (the demo draws follow --seed).",
-    ),
-    "pwil": ((), "PWIL rewarder", "Defaults: the paper's."),
-}
-
-
 def _add_train_parser(sub: argparse._SubParsersAction) -> None:
     from ilfo.agents import TD3Config
-    from ilfo.train import SUB_CONFIGS, TrainConfig, algos_using
+    from ilfo.algos import AGENT_PARTS, PART_CONFIGS, REWARD_PARTS, algos_using
+    from ilfo.training import TrainConfig
 
     p = sub.add_parser(
         "train",
@@ -122,12 +101,14 @@ def _add_train_parser(sub: argparse._SubParsersAction) -> None:
         else f"paper {_show(getattr(paper, f.name))}, fast {_show(getattr(fast, f.name))}"
         for f in dataclasses.fields(TD3Config)
     }
-    for name, (skip, what, description) in _TRAIN_GROUPS.items():
+    for name, part in {**AGENT_PARTS, **REWARD_PARTS}.items():
         algos = ", ".join(algos_using(name))
-        title = f"{what} ({algos}{'; overrides the --preset' * (name == 'td3')})"
-        group = p.add_argument_group(title, description)
+        title = f"{part.title} ({algos}{'; overrides the --preset' * (name == 'td3')})"
+        group = p.add_argument_group(title, part.description)
         defaults = preset_defaults if name == "td3" else None
-        add_dataclass_arguments(group, SUB_CONFIGS[name], skip, prefix=name, defaults=defaults)
+        add_dataclass_arguments(
+            group, PART_CONFIGS[name], part.set_by_trainer, prefix=name, defaults=defaults
+        )
     p.set_defaults(run=_run_train)
 
 
@@ -149,12 +130,12 @@ def _command() -> str:
 
 
 def _run_train(args: argparse.Namespace) -> int:
-    from ilfo.rundir import create_run_dir
-    from ilfo.train import SUB_CONFIGS, TrainConfig, Trainer, run_name
+    from ilfo.algos import PART_CONFIGS
+    from ilfo.training import TrainConfig, Trainer, create_run_dir, run_name
 
     overrides = overrides_from_args(args, TrainConfig)
     groups = {
-        name: overrides_from_args(args, SUB_CONFIGS[name], prefix=name) for name in _TRAIN_GROUPS
+        name: overrides_from_args(args, cls, prefix=name) for name, cls in PART_CONFIGS.items()
     }
     groups = {name: given for name, given in groups.items() if given}
     if args.resume:
@@ -172,7 +153,7 @@ def _run_train(args: argparse.Namespace) -> int:
         config = dataclasses.replace(
             config,
             **{
-                name: dataclasses.replace(getattr(config, f"resolved_{name}")(), **given)
+                name: dataclasses.replace(config.part_config(name), **given)
                 for name, given in groups.items()
             },
         )
@@ -316,7 +297,7 @@ def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
 def _run_expert_train(args: argparse.Namespace) -> int:
     from ilfo.agents import SACConfig
     from ilfo.experts import expert_reward_scale
-    from ilfo.train import TrainConfig, Trainer
+    from ilfo.training import TrainConfig, Trainer
 
     run_dir = Path(args.run_dir or Path("runs") / "experts" / f"{args.env}__sac__{args.seed}")
     if args.resume:
@@ -406,7 +387,7 @@ def _add_plot_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _run_plot(args: argparse.Namespace) -> int:
-    from ilfo.train import plot_runs
+    from ilfo.training import plot_runs
 
     dirs = [Path(d) for d in args.run_dirs]
     for d in dirs:

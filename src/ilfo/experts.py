@@ -21,22 +21,24 @@ from pathlib import Path
 from typing import Any
 
 import flax.serialization
-import jax
 import numpy as np
 
 from ilfo import demos as demo_io
 from ilfo.agents import Policy, policy_of
 from ilfo.envs import make_env, termination_is_finish
+from ilfo.files import load_msgpack
 from ilfo.paths import DATA_DIR
-from ilfo.rundir import load_msgpack, read_run_config
-from ilfo.train import (
+from ilfo.training import (
     BEST_POLICY_FILE,
     BEST_POLICY_INFO,
     Agent,
     TrainConfig,
-    Trainer,
     config_from_dict,
+    env_info,
+    load_run_policy,
     make_agent,
+    policy_actions,
+    read_run_config,
     rollout_policy,
     score_policy,
 )
@@ -112,28 +114,28 @@ def export_expert(
     if which not in ("best", "latest"):
         raise ValueError(f"which must be 'best' or 'latest', got {which!r}")
     run_dir = Path(run_dir)
-    trainer = Trainer.from_checkpoint(run_dir, progress=False, with_replay=False)
-    config = trainer.config
-    out = Path(out_dir) if out_dir else expert_dir(config.env)
-    out.mkdir(parents=True, exist_ok=True)
-    best, best_info = run_dir / BEST_POLICY_FILE, run_dir / BEST_POLICY_INFO
-    if which == "best" and best.is_file() and best_info.is_file():
-        policy_bytes = best.read_bytes()
+    run = load_run_policy(run_dir, "latest")  # the checkpoint's counters, and a fallback
+    best_info = run_dir / BEST_POLICY_INFO
+    if which == "best" and best_info.is_file():
+        run = load_run_policy(run_dir, "best")
         chosen = {"policy": "best", **json.loads(best_info.read_text())}
     else:
-        policy_bytes = flax.serialization.to_bytes(policy_of(trainer.state))
-        chosen = {
-            "policy": "latest",
-            "step": trainer.step,
-            "elapsed": trainer.elapsed,
-            **trainer.last_eval,
-        }
+        ckpt = run.checkpoint
+        assert ckpt is not None  # "latest" reads a checkpoint
+        chosen = {"policy": "latest", "step": ckpt.step, "elapsed": ckpt.elapsed, **ckpt.last_eval}
+    config = run.config
+    out = Path(out_dir) if out_dir else expert_dir(config.env)
+    out.mkdir(parents=True, exist_ok=True)
+    if run.source == BEST_POLICY_FILE:  # the file as the run wrote it
+        policy_bytes = (run_dir / BEST_POLICY_FILE).read_bytes()
+    else:
+        policy_bytes = flax.serialization.to_bytes(run.policy)
     (out / POLICY_FILE).write_bytes(policy_bytes)
     record = {
         "train_config": dataclasses.asdict(config),
         "steps_trained": chosen["step"],
         "hours_trained": round(chosen["elapsed"] / 3600, 3),
-        "horizon": trainer.horizon,
+        "horizon": run.env.horizon,
         "source_run": run_dir.name,
         "exported": chosen,
     }
@@ -190,9 +192,7 @@ def load_expert(path: str | Path) -> ExpertPolicy:
         raise ValueError(f"{record_path} is not a readable expert record ({err})") from None
     config = config_from_dict(raw_config, record_path)
     env = make_env(config.env, True, horizon=horizon)
-    obs_dim = int(np.prod(env.observation_space.shape))
-    action_dim = int(np.prod(env.action_space.shape))
-    agent = make_agent(config, obs_dim, action_dim, float(env.action_space.high.flat[0]), horizon)
+    agent = make_agent(config, env_info(env, config.env))
     template = policy_of(agent.functions.init(config.seed))
     policy = load_msgpack(template, path / POLICY_FILE, "expert policy")
     return ExpertPolicy(config, agent, policy, horizon)
@@ -245,7 +245,9 @@ def collect_demos(
         else:
             if fell:
                 kept_falls.append(seed)
-            actions = _replay_actions(expert, rollout.observations)
+            actions = policy_actions(
+                expert.agent, expert.policy, rollout.observations, expert.horizon
+            )
             episodes.append(
                 demo_io.Episode(
                     rollout.observations, actions, rollout.rewards, rollout.env_terminated
@@ -356,14 +358,3 @@ def evaluate_expert(
         "return_mean": float(np.mean(scored.returns)),
         "return_std": float(np.std(scored.returns)),
     }
-
-
-def _replay_actions(expert: ExpertPolicy, observations: np.ndarray) -> np.ndarray:
-    """The deterministic actions the expert took along its own observations (T, a)."""
-    obs = observations[:-1]
-    if expert.agent.time_feature:
-        t = np.arange(len(obs))
-        obs = np.concatenate([obs, ((expert.horizon - t) / expert.horizon)[:, None]], axis=1)
-    return np.asarray(
-        jax.device_get(expert.agent.functions.act(expert.policy, obs.astype(np.float32)))
-    )

@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ilfo.rundir import load_npz
+from ilfo.files import load_npz
 
 __all__ = ["ReplayBuffer", "ReplayData", "sample_batch"]
 

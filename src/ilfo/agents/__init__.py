@@ -6,6 +6,7 @@ they read transitions from a ``ilfo.replay.ReplayData``.
 """
 
 from ilfo.agents._common import Policy, policy_of
+from ilfo.agents.base import AgentFunctions
 from ilfo.agents.networks import (
     MLP,
     Critic,
@@ -29,6 +30,7 @@ __all__ = [
     "MLP",
     "SAC",
     "TD3",
+    "AgentFunctions",
     "Critic",
     "CriticEnsemble",
     "DeterministicActor",

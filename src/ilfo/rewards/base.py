@@ -1,15 +1,17 @@
-"""What every rewarder shares: input checks, the standardiser, atoms, and the output type.
+"""What every episode reward shares: the protocol, input checks, the standardiser, atoms, and the
+output type.
 
-A rewarder is built from expert demonstrations (each an array of T_i + 1 observations) and maps one
-learner episode's observations (T + 1, obs_dim) to per-step rewards (T,). It never sees actions or
-the task reward, and it knows nothing of the agent: the training loop is where they meet.
+An episode reward (``EpisodeReward``) is built from expert demonstrations (each an array of
+T_i + 1 observations) and maps one learner episode's observations (T + 1, obs_dim) to per-step
+rewards (T,). It never sees actions or the task reward, and it knows nothing of the agent: the
+training loop is where they meet.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Literal, Protocol
+from dataclasses import dataclass, field
+from typing import Any, Literal, Protocol
 
 import numpy as np
 
@@ -36,12 +38,32 @@ class RewardOutput:
     demo_index: int | None
 
 
-class Rewarder(Protocol):
-    """Maps one learner episode, observations (T + 1, obs_dim), to a :class:`RewardOutput`."""
+@dataclass(frozen=True)
+class RewardState:
+    """What an episode reward carries from one episode to the next, for checkpoints.
+
+    Attributes:
+        values: JSON-serialisable values (e.g. a numpy generator's ``bit_generator.state``).
+        arrays: Named numpy arrays (e.g. Sinkhorn warm-start potentials).
+    """
+
+    values: dict[str, Any] = field(default_factory=dict)
+    arrays: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+class EpisodeReward(Protocol):
+    """Rewards for one whole learner episode at a time (OOPS, PWIL): observations (T + 1,
+    obs_dim) to a :class:`RewardOutput` of T rewards. ``state`` and ``load_state`` carry what
+    changes between episodes (random draws, warm starts) across a checkpoint, so that a resumed
+    run rewards exactly as the uninterrupted one."""
 
     obs_dim: int
 
     def __call__(self, observations: np.ndarray) -> RewardOutput: ...
+
+    def state(self) -> RewardState: ...
+
+    def load_state(self, state: RewardState) -> None: ...
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ Defaults reproduce the paper's code (see docs/reproduction.md for where it depar
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -18,6 +18,7 @@ from ilfo.ot import METRICS, Metric, OTResult, cost_matrix, emd, greedy, sinkhor
 from ilfo.rewards.base import (
     Atoms,
     RewardOutput,
+    RewardState,
     Standardizer,
     check_demos,
     check_episode,
@@ -125,17 +126,20 @@ class OOPS:
             demo_index=index,
         )
 
-    def save_potentials(self) -> dict[str, np.ndarray]:
-        """The potentials kept for warm starts as named arrays, ``f_<demo>`` and ``g_<demo>``
-        (demo -1: the pooled demos); empty without ``warm_start``. ``load_potentials`` puts
-        them back, so that a resumed run solves exactly as the uninterrupted one."""
+    def state(self) -> RewardState:
+        """The demo draws' generator state, and the potentials kept for warm starts as named
+        arrays ``f_<demo>`` and ``g_<demo>`` (demo -1: the pooled demos; none without
+        ``warm_start``)."""
         arrays = {}
         for key, (f, g) in self._potentials.items():
             arrays[f"f_{key}"], arrays[f"g_{key}"] = f, g
-        return arrays
+        return RewardState(values={"rng": self.rng.bit_generator.state}, arrays=arrays)
 
-    def load_potentials(self, arrays: Mapping[str, np.ndarray]) -> None:
-        """Replace the warm-start potentials by those ``save_potentials`` returned."""
+    def load_state(self, state: RewardState) -> None:
+        """Continue from what ``state`` returned (a missing part is left as it is)."""
+        if "rng" in state.values:
+            self.rng.bit_generator.state = state.values["rng"]
+        arrays = state.arrays
         keys = sorted(int(name[2:]) for name in arrays if name.startswith("f_"))
         self._potentials = {
             k: (np.asarray(arrays[f"f_{k}"]), np.asarray(arrays[f"g_{k}"])) for k in keys

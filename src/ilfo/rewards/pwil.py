@@ -14,7 +14,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ilfo.ot import cost_matrix, greedy
-from ilfo.rewards.base import RewardOutput, Standardizer, check_demos, check_episode
+from ilfo.rewards.base import (
+    RewardOutput,
+    RewardState,
+    Standardizer,
+    check_demos,
+    check_episode,
+)
 
 
 @dataclass(frozen=True)
@@ -47,6 +53,13 @@ class PWIL:
         # Euclidean distances ignore the mean, so only the expert std matters (PWIL's scaler).
         self.standardizer = Standardizer.from_demos(demos, std_factor=1.0, std_floor=0.0, eps=0.0)
         self.expert_atoms = np.concatenate([self.standardizer(d[1:]) for d in demos])
+
+    def state(self) -> RewardState:
+        """Nothing: PWIL-(s) rewards each episode on its own (its coupling is deterministic)."""
+        return RewardState()
+
+    def load_state(self, state: RewardState) -> None:
+        """Nothing to restore (see ``state``)."""
 
     def __call__(self, observations: np.ndarray) -> RewardOutput:
         """Rewards (T,) of one learner episode's observations (T + 1, obs_dim)."""

@@ -1,6 +1,6 @@
 """Run directories: created once and owned by one process; checkpoints found by what is on disk.
 
-What a run directory holds is described in :mod:`ilfo.train`. The rules here keep many runs
+What a run directory holds is described in :mod:`ilfo.training`. The rules here keep many runs
 started together (a sweep) from mixing, and keep a run resumable whatever moment it was killed:
 
 - ``create_run_dir`` makes a new directory with an exclusive ``mkdir``: two runs started in the
@@ -11,8 +11,8 @@ started together (a sweep) from mixing, and keep a run resumable whatever moment
 - A checkpoint is written in ``checkpoints/.tmp_step_N`` and renamed to ``checkpoints/step_N``
   when complete, so every ``step_N`` directory is a whole checkpoint; ``latest_checkpoint`` picks
   the newest by scanning them (no pointer file that a kill could leave missing or stale).
-- ``read_run_config``, ``load_msgpack`` and ``load_npz`` turn a damaged file into a
-  ``ValueError`` that names the file and what is wrong.
+- ``read_run_config`` and ``load_run_policy`` read a run directory for any reader (evaluation,
+  experts, bench scripts), with a ``ValueError`` naming the file for a damaged one.
 """
 
 from __future__ import annotations
@@ -24,13 +24,17 @@ import os
 import re
 import shutil
 import signal
-import zipfile
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any
 
-import flax.serialization
-import jax
-import numpy as np
+from ilfo.files import load_msgpack
+
+if TYPE_CHECKING:  # at run time these are imported where used: they import this module
+    from ilfo.agents import Policy
+    from ilfo.training.build import Agent, EnvInfo
+    from ilfo.training.checkpoint import Checkpoint
+    from ilfo.training.config import TrainConfig
 
 CONFIG_FILE = "config.json"
 CHECKPOINTS_DIR = "checkpoints"
@@ -43,7 +47,6 @@ reaches the fault point NAME (see ``fault_point``)."""
 
 _STEP_DIR = re.compile(r"step_(\d+)")
 _fault_hits: dict[str, int] = {}
-T = TypeVar("T")
 
 
 class RunDirInUse(ValueError):
@@ -161,58 +164,6 @@ def read_run_config(run_dir: str | Path) -> dict[str, Any]:
     return raw
 
 
-def write_json_atomic(path: str | Path, value: Any) -> None:
-    """Write ``value`` as JSON to ``path`` through a temporary file and a rename: a reader (or a
-    kill) never sees a half-written file."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(value, indent=2) + "\n")
-    os.replace(tmp, path)
-
-
-def load_msgpack(template: T, path: str | Path, what: str) -> T:
-    """``path``'s flax msgpack restored onto ``template``, checked to have its structure and
-    every array's shape; a ValueError names the file otherwise.
-
-    ``what`` says what the file holds ("policy", "agent checkpoint"), for the messages."""
-    path = Path(path)
-    try:
-        data = path.read_bytes()
-        restored = flax.serialization.from_bytes(template, data)
-    except (ValueError, KeyError, TypeError, IndexError, AttributeError) as err:
-        # msgpack's errors (truncated, garbage) are ValueErrors; a foreign tree, Key/TypeError.
-        raise ValueError(f"{path} is not a readable {what} file ({err})") from None
-    expected = jax.tree_util.tree_leaves_with_path(template)
-    got = jax.tree_util.tree_leaves(restored)
-    if len(expected) != len(got):
-        raise ValueError(f"{path}: the {what} does not have this run's structure")
-    for (key, want), have in zip(expected, got, strict=True):
-        want_shape, have_shape = np.shape(want), np.shape(have)
-        if want_shape != have_shape:
-            raise ValueError(
-                f"{path}: {what} entry {jax.tree_util.keystr(key)} has shape {have_shape}, this "
-                f"run's config makes {want_shape} (were the env or the network sizes changed?)"
-            )
-    return restored
-
-
-def load_npz(path: str | Path, what: str) -> dict[str, np.ndarray]:
-    """Every array of an ``.npz`` written by ilfo (never unpickled), or a ValueError naming the
-    file: not a zip archive, truncated, or holding objects."""
-    path = Path(path)
-    if not zipfile.is_zipfile(path):
-        raise ValueError(f"{path} is not a {what} file (not an .npz archive)")
-    try:
-        with np.load(path, allow_pickle=False) as archive:
-            return {k: archive[k] for k in archive.files}
-    except ValueError as err:
-        if "allow_pickle" in str(err):
-            raise ValueError(f"{path}: {what} file holds Python objects, not arrays") from None
-        raise ValueError(f"{path} is not a readable {what} file ({err})") from None
-    except (zipfile.BadZipFile, OSError, EOFError, KeyError) as err:
-        raise ValueError(f"{path} is not a readable {what} file ({err}); truncated?") from None
-
-
 def fault_point(name: str) -> None:
     """Kill this process (SIGKILL, as a crash or an OOM kill would) when ``FAULT_ENV`` names
     this point; for the tests that check a run survives a kill anywhere."""
@@ -225,3 +176,64 @@ def fault_point(name: str) -> None:
     _fault_hits[name] = _fault_hits.get(name, 0) + 1
     if _fault_hits[name] >= int(count or 1):
         os.kill(os.getpid(), signal.SIGKILL)
+
+
+BEST_POLICY_FILE = "best_policy.msgpack"
+BEST_POLICY_INFO = "best_policy.json"  # the step and evaluation of best_policy.msgpack
+FINAL_POLICY_FILE = "policy.msgpack"
+
+
+@dataclass(frozen=True)
+class RunPolicy:
+    """A run's policy, with what it takes to act with it (no trainer, no replay buffer)."""
+
+    config: TrainConfig
+    env: EnvInfo
+    agent: Agent
+    policy: Policy
+    source: str
+    """Where it came from: ``policy.msgpack``, ``best_policy.msgpack`` or ``latest
+    checkpoint``."""
+    checkpoint: Checkpoint | None = None
+    """The checkpoint it was read from (its counters and evaluations; no replay buffer)."""
+
+
+def load_run_policy(run_dir: str | Path, which: str = "final") -> RunPolicy:
+    """A run's policy: ``final`` (``policy.msgpack``, written when the run finished, else the
+    newest checkpoint's), ``best`` (``best_policy.msgpack``, the best-evaluated so far) or
+    ``latest`` (the newest checkpoint's). Clear errors for what is missing or damaged."""
+    from ilfo.agents import policy_of
+    from ilfo.training.build import env_info, make_agent
+    from ilfo.training.checkpoint import load_checkpoint
+    from ilfo.training.config import config_from_dict
+
+    if which not in ("final", "best", "latest"):
+        raise ValueError(f"which must be 'final', 'best' or 'latest', got {which!r}")
+    run_dir = Path(run_dir)
+    config = config_from_dict(read_run_config(run_dir), run_dir / CONFIG_FILE)
+    env = env_info(_probe_env(config), config.env)
+    agent = make_agent(config, env)
+    template = agent.functions.init(config.seed)
+    file = {"final": FINAL_POLICY_FILE, "best": BEST_POLICY_FILE}.get(which)
+    if which == "best" and not (run_dir / BEST_POLICY_FILE).is_file():
+        raise FileNotFoundError(f"{run_dir} has no {BEST_POLICY_FILE} (no evaluation yet)")
+    if file is not None and (run_dir / file).is_file():
+        policy = load_msgpack(policy_of(template), run_dir / file, "policy")
+        return RunPolicy(config, env, agent, policy, file)
+    ckpt = latest_checkpoint(run_dir)
+    if ckpt is None:
+        raise FileNotFoundError(f"{run_dir} has neither {FINAL_POLICY_FILE} nor a checkpoint")
+    loaded = load_checkpoint(ckpt, template, buffer_dims=None)
+    return RunPolicy(config, env, agent, policy_of(loaded.agent_state), "latest checkpoint", loaded)
+
+
+def _probe_env(config: TrainConfig) -> Any:
+    """The run's environment, built only to read its spaces and horizon."""
+    from ilfo.envs import make_env
+
+    return make_env(
+        config.env,
+        config.uses_fixed_horizon,
+        horizon=config.horizon,
+        healthy_angle_range=config.healthy_angle_range,
+    )

@@ -1,0 +1,72 @@
+"""Reading and writing ilfo's files with clear errors: a damaged file is a ValueError naming it.
+
+msgpack (flax serialization) for parameters, ``.npz`` (never unpickled) for arrays, JSON for
+settings, each written through a temporary file and a rename where a reader must never see half
+of it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import zipfile
+from pathlib import Path
+from typing import Any, TypeVar
+
+import flax.serialization
+import jax
+import numpy as np
+
+T = TypeVar("T")
+
+
+def write_json_atomic(path: str | Path, value: Any) -> None:
+    """Write ``value`` as JSON to ``path`` through a temporary file and a rename: a reader (or a
+    kill) never sees a half-written file."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(value, indent=2) + "\n")
+    os.replace(tmp, path)
+
+
+def load_msgpack(template: T, path: str | Path, what: str) -> T:
+    """``path``'s flax msgpack restored onto ``template``, checked to have its structure and
+    every array's shape; a ValueError names the file otherwise.
+
+    ``what`` says what the file holds ("policy", "agent checkpoint"), for the messages."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+        restored = flax.serialization.from_bytes(template, data)
+    except (ValueError, KeyError, TypeError, IndexError, AttributeError) as err:
+        # msgpack's errors (truncated, garbage) are ValueErrors; a foreign tree, Key/TypeError.
+        raise ValueError(f"{path} is not a readable {what} file ({err})") from None
+    expected = jax.tree_util.tree_leaves_with_path(template)
+    got = jax.tree_util.tree_leaves(restored)
+    if len(expected) != len(got):
+        raise ValueError(f"{path}: the {what} does not have this run's structure")
+    for (key, want), have in zip(expected, got, strict=True):
+        want_shape, have_shape = np.shape(want), np.shape(have)
+        if want_shape != have_shape:
+            raise ValueError(
+                f"{path}: {what} entry {jax.tree_util.keystr(key)} has shape {have_shape}, this "
+                f"run's config makes {want_shape} (were the env or the network sizes changed?)"
+            )
+    return restored
+
+
+def load_npz(path: str | Path, what: str) -> dict[str, np.ndarray]:
+    """Every array of an ``.npz`` written by ilfo (never unpickled), or a ValueError naming the
+    file: not a zip archive, truncated, or holding objects."""
+    path = Path(path)
+    if not zipfile.is_zipfile(path):
+        raise ValueError(f"{path} is not a {what} file (not an .npz archive)")
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            return {k: archive[k] for k in archive.files}
+    except ValueError as err:
+        if "allow_pickle" in str(err):
+            raise ValueError(f"{path}: {what} file holds Python objects, not arrays") from None
+        raise ValueError(f"{path} is not a readable {what} file ({err})") from None
+    except (zipfile.BadZipFile, OSError, EOFError, KeyError) as err:
+        raise ValueError(f"{path} is not a readable {what} file ({err}); truncated?") from None

@@ -1,0 +1,177 @@
+"""Build a run's parts from its ``TrainConfig``: demos, agent, episode reward, normaliser.
+
+Each builder reads the algorithm's parts from the registry (``ilfo.algos``); none knows the list
+of algorithms.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from pathlib import Path
+from typing import NamedTuple
+
+import gymnasium as gym
+import numpy as np
+
+from ilfo import demos as demo_io
+from ilfo.agents import AgentFunctions
+from ilfo.algos import AGENT_PARTS, REWARD_PARTS
+from ilfo.envs import make_env
+from ilfo.paths import DATA_DIR
+from ilfo.rewards import OOPS, EpisodeReward
+from ilfo.training.config import TrainConfig
+
+
+class Agent(NamedTuple):
+    """An agent's functions as a run uses them, and whether its observations end with the time
+    feature remaining_steps / horizon (fixed-horizon runs: ``rollout.agent_observations``)."""
+
+    functions: AgentFunctions
+    time_feature: bool
+
+
+class EnvInfo(NamedTuple):
+    """What the agent and the loop need to know of an environment."""
+
+    horizon: int
+    """Episode length (the time limit)."""
+    obs_dim: int
+    action_dim: int
+    max_action: float
+    """Actions lie in [-max_action, max_action] in every dimension."""
+
+
+def make_envs(config: TrainConfig) -> tuple[gym.Env, gym.Env, EnvInfo]:
+    """The run's training environment (fixed-horizon or standard, as configured), its
+    evaluation environment (always fixed-horizon, the paper's score) and their ``EnvInfo``."""
+    angles = config.healthy_angle_range
+    env = make_env(
+        config.env, config.uses_fixed_horizon, horizon=config.horizon, healthy_angle_range=angles
+    )
+    horizon = int(env.spec.max_episode_steps)
+    eval_env = make_env(config.env, True, horizon=horizon, healthy_angle_range=angles)
+    return env, eval_env, env_info(env, config.env)
+
+
+def env_info(env: gym.Env, env_id: str) -> EnvInfo:
+    """``EnvInfo`` of ``env``; a ValueError where actions are not a symmetric box [-a, a]."""
+    act_space = env.action_space
+    high = np.asarray(act_space.high)
+    if not np.allclose(high, -np.asarray(act_space.low)) or not np.allclose(high, high.flat[0]):
+        raise ValueError(f"{env_id}: actions must lie in a symmetric box [-a, a]")
+    return EnvInfo(
+        horizon=int(env.spec.max_episode_steps),
+        obs_dim=int(np.prod(env.observation_space.shape)),
+        action_dim=int(np.prod(act_space.shape)),
+        max_action=float(high.flat[0]),
+    )
+
+
+class DemoSet(NamedTuple):
+    """The demonstrations a run imitates."""
+
+    observations: list[np.ndarray]
+    """Each (T_i + 1, obs_dim); empty for task-reward algos."""
+    mean_return: float
+    """Their mean task score (what scores are divided by); NaN where none was recorded."""
+    distance_probe: OOPS | None
+    """OOPS against the first demo with the paper's defaults: the OT distance that evaluations
+    log (None without demos)."""
+
+
+def load_demo_set(config: TrainConfig, obs_dim: int) -> DemoSet:
+    """The run's demos (none for task-reward algos), checked against the env's ``obs_dim``."""
+    if not config.imitation:
+        return DemoSet([], math.nan, None)
+    episodes = load_demos(config)
+    observations = [e.observations for e in episodes]
+    if observations[0].shape[1] != obs_dim:
+        raise ValueError(
+            f"demos have observations of dimension {observations[0].shape[1]}, "
+            f"{config.env} has {obs_dim}"
+        )
+    returns = [e.task_score for e in episodes if e.task_score is not None]
+    mean = float(np.mean(returns)) if returns else math.nan
+    return DemoSet(observations, mean, OOPS(observations[:1]))
+
+
+def default_demos_path(env_id: str) -> Path:
+    """The shipped expert demos of ``env_id``."""
+    return DATA_DIR / "experts" / env_id / "demos.npz"
+
+
+def load_demos(config: TrainConfig) -> list[demo_io.Episode]:
+    """The first ``num_demos`` demos of the configured file, with clear errors."""
+    path = Path(config.demos) if config.demos else default_demos_path(config.env)
+    if not path.is_file():
+        hint = "" if config.demos else " (no shipped expert demos for this env yet: pass --demos)"
+        raise FileNotFoundError(f"no demonstration file at {path}{hint}")
+    data = demo_io.load(path)
+    if data.env_id and data.env_id != config.env:
+        raise ValueError(f"{path} holds demos of {data.env_id}, not {config.env}")
+    if config.num_demos > len(data.episodes):
+        raise ValueError(f"--num-demos {config.num_demos}: {path} has {len(data.episodes)}")
+    used_seeds = data.provenance.get("seeds", [])[: config.num_demos]
+    fell = sorted(set(used_seeds) & set(data.provenance.get("kept_seeds_with_a_fall", [])))
+    if fell:  # an expert shipped as the best reached (see its card); imitation copies the fall
+        warnings.warn(
+            f"{path}: the expert fell (the environment terminated) in the demos of seeds {fell}; "
+            "these demos are the best this expert reached, not a full expert's",
+            stacklevel=2,
+        )
+    return data.episodes[: config.num_demos]
+
+
+def make_agent(config: TrainConfig, env: EnvInfo) -> Agent:
+    """Build the agent of ``config.algo`` (its config: ``config.agent_config(env.horizon)``).
+
+    Fixed-horizon runs append the time feature remaining_steps / horizon to observations.
+    """
+    time_feature = config.uses_fixed_horizon
+    part = AGENT_PARTS[config.recipe.agent]
+    functions = part.make(
+        config.agent_config(env.horizon),
+        env.obs_dim + int(time_feature),
+        env.action_dim,
+        env.max_action,
+    )
+    return Agent(functions, time_feature)
+
+
+def make_reward(config: TrainConfig, demos: list[np.ndarray]) -> EpisodeReward | None:
+    """The episode reward of ``config.algo``; None for the task reward."""
+    name = config.recipe.reward
+    return None if name is None else REWARD_PARTS[name].make(demos, config.part_config(name))
+
+
+def network_normalizer(
+    random_states: np.ndarray, expert_states: list[np.ndarray], std_floor: float = 0.33
+) -> tuple[np.ndarray, np.ndarray]:
+    """The agents' observation normaliser, as the paper's code fits it when the policy takes over.
+
+    mean: of the random-exploration states. std: of the random states together with the expert
+    states, the expert part repeated ``len(random) // len(expert)`` times (at least once) so that
+    both weigh about the same (10,000 random states and one 1,000-step demo: the demo counts ten
+    times); a zero std becomes 1, then std is floored at ``std_floor``. Without expert states
+    (task-reward runs) the std is the random states' own.
+
+    Args:
+        random_states: (N, obs_dim) states of the random episodes (each episode's last left out).
+        expert_states: demos' states, each (T_i, obs_dim) (each demo's last left out).
+    """
+    random_states = np.asarray(random_states, dtype=np.float64)
+    pool = [random_states]
+    if expert_states:
+        expert = np.concatenate(expert_states).astype(np.float64)
+        pool += [expert] * max(1, len(random_states) // len(expert))
+    states = np.concatenate(pool)
+    std = states.std(axis=0, ddof=1) if len(states) > 1 else np.ones(states.shape[1])
+    std = np.where(np.isclose(std, 0.0), 1.0, std)
+    return random_states.mean(axis=0), np.maximum(std, std_floor)
+
+
+def run_name(config: TrainConfig) -> str:
+    """env__algo__seed__time, CleanRL style."""
+    return f"{config.env}__{config.algo}__{config.seed}__{time.strftime('%Y%m%d-%H%M%S')}"

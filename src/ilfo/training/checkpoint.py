@@ -1,0 +1,140 @@
+"""Checkpoints: the whole state of a run at an episode boundary, written atomically.
+
+A checkpoint is the directory ``checkpoints/step_N`` (N the environment steps done): the agent
+state (``agent.msgpack``), the replay buffer (``replay.npz``), the random-phase states kept
+for the normaliser (``random_states.npz``), the episode reward's state (``state.json``'s
+``reward_state`` and ``reward_arrays.npz``) and the counters (``state.json``, written last).
+Every other source of randomness is derived from (seed, episode index), so a run resumed from
+a checkpoint reproduces the uninterrupted one exactly. It is written in ``.tmp_step_N`` and
+renamed once complete; older checkpoints are removed after, so a kill at any moment leaves at
+least one complete checkpoint (``run_dir.latest_checkpoint`` finds the newest).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import flax.serialization
+import numpy as np
+
+from ilfo.files import load_msgpack, load_npz
+from ilfo.replay import ReplayBuffer
+from ilfo.rewards import RewardState
+from ilfo.training.run_dir import (
+    CHECKPOINTS_DIR,
+    checkpoint_steps,
+    fault_point,
+    latest_checkpoint,
+)
+
+CHECKPOINT_SCHEMA = 1
+REWARD_ARRAYS_FILE = "reward_arrays.npz"
+# Written by ilfo before 2026-12-01 (OOPS's generator and warm starts); still read.
+_OLD_RNG_KEY, _OLD_POTENTIALS_FILE = "rewarder_rng", "rewarder_potentials.npz"
+
+
+@dataclass
+class Checkpoint:
+    """What a run needs to continue exactly."""
+
+    step: int
+    episode: int
+    elapsed: float
+    """Wall-clock seconds of training so far."""
+    last_eval: dict[str, float]
+    best_eval: dict[str, float]
+    agent_state: Any
+    buffer: ReplayBuffer | None
+    """None when loaded without the replay buffer (to read the policy only)."""
+    random_states: list[np.ndarray] = field(default_factory=list)
+    """States of the random phase, until the normaliser is fitted from them."""
+    reward_state: RewardState | None = None
+    """The episode reward's ``state()``; None for the task reward."""
+
+
+def save_checkpoint(run_dir: Path, ckpt: Checkpoint) -> Path:
+    """Write ``ckpt`` as ``run_dir/checkpoints/step_N`` (see the module) and return it."""
+    root = Path(run_dir) / CHECKPOINTS_DIR
+    final = root / f"step_{ckpt.step:09d}"
+    if latest_checkpoint(run_dir) == final:
+        return final  # this step is checkpointed already: the state has not changed since
+    tmp = root / f".tmp_step_{ckpt.step:09d}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    (tmp / "agent.msgpack").write_bytes(flax.serialization.to_bytes(ckpt.agent_state))
+    assert ckpt.buffer is not None, "a checkpoint needs the replay buffer"
+    ckpt.buffer.save(tmp / "replay.npz")
+    if ckpt.random_states:
+        np.savez(tmp / "random_states.npz", *ckpt.random_states)
+    reward = ckpt.reward_state
+    if reward is not None and reward.arrays:
+        np.savez(tmp / REWARD_ARRAYS_FILE, **reward.arrays)
+    meta = {
+        "schema": CHECKPOINT_SCHEMA,
+        "step": ckpt.step,
+        "episode": ckpt.episode,
+        "elapsed": ckpt.elapsed,
+        "last_eval": ckpt.last_eval,
+        "best_eval": ckpt.best_eval,
+        "reward_state": None if reward is None else reward.values,
+    }
+    (tmp / "state.json").write_text(json.dumps(meta))  # last: see run_dir.CHECKPOINT_FILES
+    fault_point("checkpoint_before_rename")
+    os.replace(tmp, final)
+    fault_point("checkpoint_before_cleanup")
+    for _, old in checkpoint_steps(run_dir)[:-1]:
+        shutil.rmtree(old, ignore_errors=True)
+    return final
+
+
+def load_checkpoint(
+    ckpt: Path, agent_template: Any, buffer_dims: tuple[int, int] | None
+) -> Checkpoint:
+    """Read checkpoint directory ``ckpt``; the agent state is restored onto ``agent_template``
+    (its structure and shapes checked), the replay buffer only where ``buffer_dims`` (obs,
+    action) is given, and checked against it. A damaged or mismatched file is a ValueError
+    naming it."""
+    state_path = ckpt / "state.json"
+    try:
+        meta = json.loads(state_path.read_text(encoding="utf-8"))
+        if meta.get("schema") != CHECKPOINT_SCHEMA:
+            raise ValueError(f"checkpoint schema {meta.get('schema')}, expected 1")
+        counters = int(meta["step"]), int(meta["episode"]), float(meta["elapsed"])
+        evals = dict(meta["last_eval"]), dict(meta.get("best_eval", {}))
+        if "reward_state" in meta:
+            values = meta["reward_state"]
+        else:
+            values = None if meta[_OLD_RNG_KEY] is None else {"rng": meta[_OLD_RNG_KEY]}
+    except (ValueError, KeyError, TypeError, AttributeError) as err:
+        raise ValueError(f"{state_path} is not a readable checkpoint state ({err})") from None
+    agent_state = load_msgpack(agent_template, ckpt / "agent.msgpack", "agent checkpoint")
+    buffer = None
+    if buffer_dims is not None:
+        buffer = ReplayBuffer.load(ckpt / "replay.npz")
+        if (buffer.obs_dim, buffer.action_dim) != buffer_dims:
+            raise ValueError(
+                f"{ckpt / 'replay.npz'}: transitions of (obs, action) dims "
+                f"{(buffer.obs_dim, buffer.action_dim)}, this run's config makes {buffer_dims}"
+            )
+    arrays_path = next(
+        (p for p in (ckpt / REWARD_ARRAYS_FILE, ckpt / _OLD_POTENTIALS_FILE) if p.is_file()), None
+    )
+    arrays = {} if arrays_path is None else load_npz(arrays_path, "reward state")
+    reward_state = None if values is None and not arrays else RewardState(values or {}, arrays)
+    random_states = []
+    if (ckpt / "random_states.npz").is_file():
+        saved = load_npz(ckpt / "random_states.npz", "random-phase states")
+        random_states = [saved[k] for k in sorted(saved, key=lambda n: int(n.split("_")[-1]))]
+    return Checkpoint(
+        *counters,
+        *evals,
+        agent_state,
+        buffer,
+        random_states,
+        reward_state,  # type: ignore[arg-type]
+    )

@@ -1,0 +1,206 @@
+"""``TrainConfig``: one training run, every setting typed and documented (each field is a flag of
+``ilfo train``), and ``config_from_dict`` to read one back from a file."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+from ilfo.agents import SACConfig, TD3Config
+from ilfo.algos import AGENT_PARTS, ALGOS, PART_CONFIGS, Recipe, algos_using, recipe
+from ilfo.config import dataclass_from_dict
+from ilfo.rewards import OOPSConfig, PWILConfig
+
+Algo = Literal["oops-td3", "oops-ddpg", "oops-sac", "pwil-td3", "td3", "sac"]
+"""The names of ``ilfo.algos.ALGOS`` (the CLI's ``--algo`` choices; a test keeps them equal)."""
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """One training run. Defaults: OOPS+TD3 on Hopper-v5 from one demo, as in the paper."""
+
+    env: str = "Hopper-v5"
+    """Gymnasium environment id."""
+    algo: Algo = "oops-td3"
+    """The algorithm (``ilfo.algos.ALGOS``): oops-td3, oops-ddpg, oops-sac, pwil-td3, or
+    td3 / sac on the true task reward (no demos)."""
+    demos: str | None = None
+    """Demonstration file (.npz); omit it (None) for the env's shipped expert demos
+    (data/experts/<env>/demos.npz)."""
+    num_demos: int = 1
+    """How many of the file's demos to imitate (the first N)."""
+    steps: int = 1_000_000
+    """Environment steps in total (random ones included)."""
+    start_steps: int = 10_000
+    """Uniformly random steps before the policy acts."""
+    updates_per_step: int = 1
+    """Agent updates per environment step collected (the update-to-data ratio), run after each
+    episode; 1 is the paper's. More spends compute to learn more from the same data."""
+    preset: Literal["paper", "fast"] = "paper"
+    """TD3/DDPG hyperparameters: paper (critics 1024-1024) or fast (critics 256-256); ``td3``
+    (the --td3-* flags) changes single ones."""
+    seed: int = 0
+    """Seed of everything: environment, exploration, networks, demo draws."""
+    fixed_horizon: bool | None = None
+    """Run every episode to the full horizon, ignoring termination (the paper); None: on for
+    imitation, off for true-reward algos."""
+    horizon: int | None = None
+    """Episode length; None: the environment's limit (1,000 for MuJoCo)."""
+    healthy_angle_range: tuple[float, float] | None = None
+    """Torso angle range (radians) outside which Hopper or Walker2d counts as fallen, in this
+    run's training and evaluation episodes; None: the env's own ((-0.2, 0.2) for Hopper).
+    Stricter ranges train experts with a margin from a fall; demos and the paper's scores always
+    use the env's own range."""
+    eval_every: int = 5_000
+    """Evaluate every this many environment steps."""
+    eval_episodes: int = 10
+    """Deterministic episodes per evaluation."""
+    best_by: Literal["score", "return"] = "score"
+    """Which evaluation picks best_policy.msgpack: ``score`` (the paper's fixed-horizon score)
+    or ``return`` (the standard return, which stops at the first fall: what an expert is judged
+    by; ``ilfo expert train`` uses it)."""
+    checkpoint_every: int = 50_000
+    """Checkpoint every this many environment steps (and on Ctrl-C, and at the end)."""
+    checkpoint_minutes: float = 10.0
+    """Also checkpoint when this many minutes of wall-clock time have passed since the last
+    checkpoint (or the start), so that a crash loses at most that much of any run, short runs
+    included; 0 turns the clock off (steps only)."""
+    replay_capacity: int = 1_000_000
+    """Replay buffer size in transitions."""
+    out: str = "runs"
+    """Parent directory of the run directory."""
+    td3: TD3Config | None = None
+    """TD3/DDPG agent (algos oops-td3, oops-ddpg, pwil-td3, td3); None: the preset's
+    (``TD3Config.paper()`` or ``.fast()``). Whatever is given, the trainer sets ``max_time`` to
+    the episode horizon, keeps ``time_augmentation`` only where observations carry the time
+    feature (fixed-horizon runs), and applies ``ddpg_config`` for oops-ddpg."""
+    sac: SACConfig | None = None
+    """SAC agent (algos oops-sac, sac); None: ``SACConfig()``, Haarnoja et al.'s defaults."""
+    oops: OOPSConfig | None = None
+    """OOPS rewarder (algos oops-*); None: the paper's defaults. Its ``seed`` is always replaced
+    by this config's ``seed``, so that one seed sets a whole run (seed sweeps with a custom OOPS
+    config stay seed sweeps)."""
+    pwil: PWILConfig | None = None
+    """PWIL rewarder (algo pwil-td3); None: the paper's defaults (``PWILConfig()``)."""
+
+    def __post_init__(self) -> None:
+        algo = recipe(self.algo)
+        for name, cls in PART_CONFIGS.items():  # dicts, as read back from config.json
+            object.__setattr__(self, name, dataclass_from_dict(cls, getattr(self, name), name))
+        for name in PART_CONFIGS:
+            if getattr(self, name) is not None and name not in (algo.agent, algo.reward):
+                rewarder = f"the {algo.reward.upper()}" if algo.reward else "no"
+                raise ValueError(
+                    f"{name} settings (--{name}-* flags) do not apply to algo {self.algo!r}, "
+                    f"which uses the {algo.agent.upper()} agent and {rewarder} rewarder; "
+                    f"{name} is for {', '.join(algos_using(name))}"
+                )
+        if self.preset not in ("paper", "fast"):
+            raise ValueError(f"preset must be 'paper' or 'fast', got {self.preset!r}")
+        if self.best_by not in ("score", "return"):
+            raise ValueError(f"best_by must be 'score' or 'return', got {self.best_by!r}")
+        counts = (
+            "steps",
+            "eval_every",
+            "eval_episodes",
+            "checkpoint_every",
+            "num_demos",
+            "replay_capacity",
+            "updates_per_step",
+        )
+        for name in (*counts, "start_steps", "seed", "horizon"):
+            value = getattr(self, name)
+            # 1e6 or True would pass the range checks and fail far from here, or not at all.
+            if value is None:
+                continue
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+                raise ValueError(f"{name} must be an integer, got {value!r}")
+            object.__setattr__(self, name, int(value))  # numpy integers: JSON needs int
+        for name in counts:
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.start_steps < 0:
+            raise ValueError(f"start_steps must be >= 0, got {self.start_steps}")
+        minutes = self.checkpoint_minutes
+        if isinstance(minutes, bool) or not isinstance(minutes, numbers.Real):
+            raise ValueError(f"checkpoint_minutes must be a number, got {minutes!r}")
+        if not (math.isfinite(minutes) and minutes >= 0):
+            raise ValueError(f"checkpoint_minutes must be >= 0 (0: off), got {minutes!r}")
+        object.__setattr__(self, "checkpoint_minutes", float(minutes))
+        if self.healthy_angle_range is not None:  # a list, as read back from config.json
+            angles = tuple(float(v) for v in self.healthy_angle_range)
+            if len(angles) != 2 or not angles[0] < angles[1]:
+                raise ValueError(
+                    f"healthy_angle_range must be (low, high) with low < high, "
+                    f"got {self.healthy_angle_range}"
+                )
+            object.__setattr__(self, "healthy_angle_range", angles)
+
+    @property
+    def recipe(self) -> Recipe:
+        """The algorithm's registry entry (``ilfo.algos``): its agent and reward parts."""
+        return ALGOS[self.algo]
+
+    @property
+    def imitation(self) -> bool:
+        """Whether the algo learns from demos (True) or from the task reward (False)."""
+        return self.recipe.imitation
+
+    @property
+    def uses_fixed_horizon(self) -> bool:
+        """The resolved ``fixed_horizon``."""
+        return self.imitation if self.fixed_horizon is None else self.fixed_horizon
+
+    def part_config(self, part: str) -> Any:
+        """The config of part ``part`` (a field name: ``td3``, ``oops``, ...) as given, else its
+        default (the ``preset``'s for an agent); a ``seed`` field is always this run's seed, so
+        that one seed sets a whole run (seed sweeps with a custom config stay seed sweeps)."""
+        given = getattr(self, part)
+        if given is None:
+            given = AGENT_PARTS[part].default(self.preset) if part in AGENT_PARTS else None
+            given = PART_CONFIGS[part]() if given is None else given
+        if any(f.name == "seed" for f in dataclasses.fields(given)):
+            given = dataclasses.replace(given, seed=self.seed)
+        return given
+
+    def agent_config(self, horizon: int) -> TD3Config | SACConfig:
+        """The agent's config exactly as the run builds it, for episodes of ``horizon`` steps:
+        what the trainer sets (``AgentPart.for_run``: TD3's ``max_time`` is the horizon, time
+        augmentation only where observations carry the time feature), then the recipe's change
+        (``ddpg_config`` for oops-ddpg)."""
+        algo = self.recipe
+        config = AGENT_PARTS[algo.agent].for_run(
+            self.part_config(algo.agent), horizon, self.uses_fixed_horizon
+        )
+        return config if algo.adapt_agent is None else algo.adapt_agent(config)
+
+    def resolved(self, horizon: int) -> TrainConfig:
+        """This config with its algo's part configs filled in as the run uses them, the others
+        None. What a run's config.json records, so that it shows every setting and builds the
+        same run even if presets change."""
+        algo = self.recipe
+        parts = dict.fromkeys(PART_CONFIGS)
+        parts[algo.agent] = self.agent_config(horizon)
+        if algo.reward is not None:
+            parts[algo.reward] = self.part_config(algo.reward)
+        return dataclasses.replace(self, **parts)
+
+
+def config_from_dict(raw: dict[str, Any], source: str | Path) -> TrainConfig:
+    """A ``TrainConfig`` from a dict read from a file (config.json, expert.json); a ValueError
+    names ``source`` and the setting at fault (an unknown key, a value of the wrong type)."""
+    known = {f.name for f in dataclasses.fields(TrainConfig)}
+    unknown = sorted(set(raw) - known)
+    if unknown:
+        raise ValueError(
+            f"{source}: unknown setting(s) {', '.join(map(repr, unknown))} (written by another "
+            "ilfo version, or edited?)"
+        )
+    try:
+        return TrainConfig(**raw)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{source}: {err}") from None

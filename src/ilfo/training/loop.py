@@ -1,0 +1,513 @@
+"""The training loop: collect an episode, reward it, store it, update the agent, evaluate.
+
+This is the one place where an episode reward and an agent meet (neither imports the other). It
+follows the paper's code (docs/reproduction.md): uniformly random actions for ``start_steps``,
+then one episode at a time with the policy frozen; at the end of each episode its rewards are
+computed and the episode enters the replay buffer, then as many updates run as steps were
+collected (``updates_per_step`` times as many; jitted calls). Every ``eval_every`` steps,
+deterministic fixed-horizon episodes are scored. ``LoopHooks`` observe it (timing, logging)
+without changing it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import math
+import signal
+import time
+from collections.abc import Iterator
+from contextlib import AbstractContextManager
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+
+from ilfo.agents import policy_of
+from ilfo.files import write_json_atomic
+from ilfo.replay import ReplayBuffer
+from ilfo.rewards import RewardOutput
+from ilfo.training.build import (
+    load_demo_set,
+    make_agent,
+    make_envs,
+    make_reward,
+    network_normalizer,
+)
+from ilfo.training.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from ilfo.training.config import TrainConfig, config_from_dict
+from ilfo.training.metrics import MetricsLog, truncate_metrics
+from ilfo.training.plots import plot_runs
+from ilfo.training.rollout import agent_observation, agent_observations, score_policy
+from ilfo.training.run_dir import (
+    BEST_POLICY_FILE,
+    BEST_POLICY_INFO,
+    CHECKPOINTS_DIR,
+    CONFIG_FILE,
+    FINAL_POLICY_FILE,
+    RunLock,
+    fault_point,
+    latest_checkpoint,
+    read_run_config,
+    remove_incomplete_checkpoints,
+)
+
+_NOTHING = contextlib.nullcontext()
+
+
+class LoopHooks:
+    """Observers of the training loop (``Trainer(..., hooks=...)``): override what you need;
+    every default does nothing. They see the trainer but must not change it."""
+
+    def timed(self, piece: str) -> AbstractContextManager[Any]:
+        """A context around each piece of the loop's work: ``env`` (one environment step),
+        ``act`` (one exploratory action, synchronised), ``reward`` (an episode's rewards),
+        ``replay`` (an episode into the buffer: an asynchronous write), ``update`` (an
+        episode's agent updates, synchronised) and ``evaluate``."""
+        return _NOTHING
+
+    def episode_started(self, trainer: Trainer) -> None:
+        """Before an episode's first step."""
+
+    def episode_rewarded(self, trainer: Trainer, output: RewardOutput) -> None:
+        """After the episode reward has rewarded an episode (imitation algos only)."""
+
+    def episode_ended(self, trainer: Trainer, row: dict[str, Any]) -> None:
+        """After an episode's row was written to the metrics (before any checkpoint)."""
+
+
+class Trainer:
+    """A training run in a run directory; ``Trainer.resume(run_dir)`` continues one."""
+
+    def __init__(
+        self,
+        config: TrainConfig,
+        run_dir: str | Path,
+        *,
+        progress: bool = True,
+        hooks: LoopHooks | None = None,
+    ) -> None:
+        self.config = config
+        self.run_dir = Path(run_dir)
+        self.progress = progress
+        self.hooks = hooks or LoopHooks()
+        self.resume_command = f"ilfo train --resume {self.run_dir}"
+        """What the interrupt message tells the user to run to continue (the CLI may change it)."""
+        self.env, self.eval_env, env = make_envs(config)
+        self.horizon, self.obs_dim = env.horizon, env.obs_dim
+        self.action_dim, self.max_action = env.action_dim, env.max_action
+        demos = load_demo_set(config, env.obs_dim)
+        self.demos, self.demo_return = demos.observations, demos.mean_return
+        self.distance_probe = demos.distance_probe
+        self.rewarder = make_reward(config, self.demos)
+        self.agent = make_agent(config, env)
+        self.state = self.agent.functions.init(config.seed)
+        self.buffer = ReplayBuffer(
+            config.replay_capacity, env.obs_dim + int(self.agent.time_feature), env.action_dim
+        )
+        self.step = 0
+        self.episode = 0
+        self.random_states: list[np.ndarray] = []
+        self.last_eval: dict[str, float] = {}
+        self.elapsed = 0.0
+        self.best_eval: dict[str, float] = {}
+        """The best evaluation so far by ``config.best_by``, with its step."""
+        self._lock = RunLock(self.run_dir)  # held while this trainer writes the run directory
+        self._resumed = False  # set by ``resume``: the run directory holds this run already
+        self._metrics: MetricsLog | None = None  # opened by ``train``
+
+    def checkpoint_plan(self) -> str:
+        """Where and when this run checkpoints, in words (the CLI prints it at the start)."""
+        cfg = self.config
+        clock = f" and every {cfg.checkpoint_minutes:g} min" if cfg.checkpoint_minutes else ""
+        return (
+            f"checkpoints: {self.run_dir / CHECKPOINTS_DIR}, every {cfg.checkpoint_every:,} "
+            f"steps{clock}, at the end and on Ctrl-C"
+        )
+
+    # ----------------------------------------------------------------------------- the loop
+    def train(self) -> Path:
+        """Run until ``config.steps``; returns the run directory."""
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        self._lock.acquire()  # one writer per run directory (RunDirInUse otherwise)
+        try:
+            if not self._resumed:
+                self._start_run_dir()
+            self._metrics = MetricsLog(self.run_dir, self.step if self._resumed else None)
+            self._loop()
+            self._metrics.close()
+            self._save_policy(FINAL_POLICY_FILE)
+            plot_runs([self.run_dir], self.run_dir / "learning_curve.png")
+        finally:
+            if self._metrics is not None:
+                self._metrics.close()
+            self._lock.release()
+        return self.run_dir
+
+    def _start_run_dir(self) -> None:
+        config_path = self.run_dir / CONFIG_FILE
+        if config_path.exists():
+            raise ValueError(
+                f"{self.run_dir} holds a run already: continue it with "
+                "Trainer.resume (ilfo train --resume), or choose another directory"
+            )
+        resolved = self.config.resolved(self.horizon)  # every setting, as the run uses it
+        write_json_atomic(config_path, dataclasses.asdict(resolved))
+
+    def _loop(self) -> None:
+        """Episodes until ``config.steps``, checkpointing by steps and by the clock; the first
+        Ctrl-C (or SIGTERM) stops at the next episode boundary with a checkpoint."""
+        cfg = self.config
+        bar = _progress_bar(cfg.steps, self.step, self.progress)
+        start_wall = time.perf_counter() - self.elapsed
+        next_checkpoint = (self.step // cfg.checkpoint_every + 1) * cfg.checkpoint_every
+        last_checkpoint, last_checkpoint_time = self.step, time.monotonic()
+        checkpoint_seconds = 60.0 * cfg.checkpoint_minutes or math.inf
+        try:
+            with _stop_requests() as stop:
+                while self.step < cfg.steps:
+                    t0 = time.perf_counter()
+                    row = self._episode()
+                    self.elapsed = time.perf_counter() - start_wall
+                    row["wall_time"] = round(self.elapsed, 3)
+                    row["steps_per_s"] = round(row.pop("_steps") / (time.perf_counter() - t0), 1)
+                    self._metrics.write(row)  # type: ignore[union-attr]
+                    self.hooks.episode_ended(self, row)
+                    fault_point("episode_end")
+                    bar.update(self.step - bar.n)
+                    bar.set_postfix(_postfix(row, self.last_eval), refresh=False)
+                    if (
+                        self.step >= next_checkpoint
+                        or self.step >= cfg.steps
+                        or stop.requested
+                        or time.monotonic() - last_checkpoint_time >= checkpoint_seconds
+                    ):
+                        self.save_checkpoint()
+                        last_checkpoint, last_checkpoint_time = self.step, time.monotonic()
+                        next_checkpoint = (self.step // cfg.checkpoint_every + 1) * (
+                            cfg.checkpoint_every
+                        )
+                    if stop.requested and self.step < cfg.steps:
+                        raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            # A stop request is honoured at an episode boundary, just checkpointed; a second
+            # Ctrl-C quits at once, and the last checkpoint (consistent by construction) stays.
+            bar.close()
+            print(
+                f"\ninterrupted: checkpoint at step {last_checkpoint}; continue with "
+                f"`{self.resume_command}`"
+            )
+            raise
+        bar.close()
+
+    def _episode(self) -> dict[str, Any]:
+        """Collect, reward, store and learn from one episode; evaluate when due."""
+        cfg = self.config
+        random_phase = self.step < cfg.start_steps
+        if not random_phase and not bool(self.state.normalizer_set):
+            self._fit_normalizer()
+        self.hooks.episode_started(self)
+        observations, actions, task_rewards, env_terminated, terminated = self._collect(
+            random_phase
+        )
+        num_steps = len(actions)
+        self.step += num_steps
+        self.episode += 1
+
+        if self.rewarder is not None:
+            with self.hooks.timed("reward"):
+                output = self.rewarder(observations)
+            self.hooks.episode_rewarded(self, output)
+            rewards = output.rewards
+        else:
+            rewards = np.asarray(task_rewards)
+            if cfg.uses_fixed_horizon:
+                rewards = np.where(env_terminated, 0.0, rewards)
+        agent_obs = agent_observations(observations, self.horizon, self.agent.time_feature)
+        # The paper's code cuts bootstrapping at the end of a fixed-horizon episode (its time
+        # feature is then 0); standard mode bootstraps through truncation only.
+        done = terminated or (cfg.uses_fixed_horizon and num_steps == self.horizon)
+        with self.hooks.timed("replay"):
+            self.buffer.add_episode(agent_obs, np.asarray(actions), rewards, terminated=done)
+        if random_phase:
+            self.random_states.append(observations[:-1])
+
+        row: dict[str, Any] = {
+            "step": self.step,
+            "episode": self.episode,
+            "proxy_return": round(float(np.sum(rewards)), 4),
+            "train_task_return": round(float(np.sum(task_rewards)), 4),
+            "_steps": num_steps,
+        }
+        if not random_phase:
+            with self.hooks.timed("update"):
+                self.state, metrics = self._update(num_steps * cfg.updates_per_step)
+            row["critic_loss"] = round(metrics["critic_loss"], 5)
+            row["actor_loss"] = round(metrics["actor_loss"], 5)
+        if self.step // cfg.eval_every > (self.step - num_steps) // cfg.eval_every:
+            with self.hooks.timed("evaluate"):
+                self.last_eval = self.evaluate()
+            row.update(self.last_eval)
+            self._keep_best()
+        return row
+
+    def _collect(self, random_phase: bool) -> tuple[np.ndarray, list, list, list, bool]:
+        """One episode of the frozen policy (uniform actions in the random phase): its
+        observations (T + 1, d), actions, task rewards, reported terminations, and whether it
+        ended by termination. Its randomness comes from (seed, episode index) alone."""
+        cfg, funcs, timed = self.config, self.agent.functions, self.hooks.timed
+        rng = np.random.default_rng([cfg.seed, self.episode])
+        obs, _ = self.env.reset(seed=int(rng.integers(2**31)))
+        observations, actions, task_rewards, env_terminated = [obs], [], [], []
+        explore_key = jax.random.fold_in(jax.random.PRNGKey(cfg.seed), self.episode)
+        # All of the episode's exploration keys at once, as numpy: one dispatch, not one a step.
+        step_keys = np.asarray(jax.random.split(explore_key, self.horizon))
+        policy = policy_of(self.state)  # frozen for the episode; few leaves: fast dispatch
+        time_feature, terminated = self.agent.time_feature, False
+        for t in range(self.horizon):
+            if random_phase:
+                action = rng.uniform(-self.max_action, self.max_action, self.action_dim)
+            else:
+                agent_obs = agent_observation(obs, t, self.horizon, time_feature)
+                with timed("act"):
+                    action = np.asarray(funcs.act(policy, agent_obs, step_keys[t]), np.float64)
+            with timed("env"):
+                obs, reward, terminated, truncated, info = self.env.step(action)
+            observations.append(obs)
+            actions.append(action)
+            task_rewards.append(float(reward))
+            env_terminated.append(bool(info.get("env_terminated", terminated)))
+            if terminated or truncated:
+                break
+        return np.asarray(observations), actions, task_rewards, env_terminated, terminated
+
+    def _update(self, num_updates: int) -> tuple[Any, dict[str, float]]:
+        """``num_updates`` agent updates, run as jitted chunks of power-of-two sizes.
+
+        ``update`` compiles once per number of updates; episodes of every length would each
+        compile anew, whereas powers of two compile at most log2(horizon * updates_per_step) + 1
+        times. Every update draws its keys from the state, so chunks give exactly the updates
+        one call would.
+        """
+        state, totals = self.state, {"critic_loss": 0.0, "actor_loss": 0.0}
+        remaining, chunk = num_updates, 1 << (num_updates.bit_length() - 1)
+        while remaining:
+            if chunk <= remaining:
+                state, metrics = self.agent.functions.update(
+                    state, self.buffer.data, self.buffer.size, num_updates=chunk
+                )
+                for name in totals:
+                    totals[name] += float(metrics[name]) * chunk
+                remaining -= chunk
+            chunk >>= 1
+        return state, {name: total / num_updates for name, total in totals.items()}
+
+    def _fit_normalizer(self) -> None:
+        """Fix the networks' normaliser once, when the policy takes over: see
+        ``build.network_normalizer``."""
+        random_states = (
+            np.concatenate(self.random_states)
+            if self.random_states
+            else np.zeros((1, self.obs_dim))
+        )
+        mean, std = network_normalizer(random_states, [d[:-1] for d in self.demos])
+        if self.agent.time_feature:  # the time feature is already in [0, 1]
+            mean, std = np.append(mean, 0.0), np.append(std, 1.0)
+        self.state = self.agent.functions.set_normalizer(self.state, mean, std)
+        self.random_states = []
+
+    # ------------------------------------------------------------------------ evaluation
+    def evaluate(self) -> dict[str, float]:
+        """Deterministic fixed-horizon episodes: both scores, normalised, and OT distance."""
+        seeds = [10_000_019 * (self.config.seed + 1) + k for k in range(self.config.eval_episodes)]
+        scored = score_policy(
+            self.eval_env, self.agent, self.state, self.horizon, seeds, self.distance_probe
+        )
+        out = {
+            "eval_score": round(float(np.mean(scored.scores)), 3),
+            "eval_return": round(float(np.mean(scored.returns)), 3),
+        }
+        if not math.isnan(self.demo_return):
+            out["eval_score_norm"] = round(out["eval_score"] / self.demo_return, 4)
+            out["eval_return_norm"] = round(out["eval_return"] / self.demo_return, 4)
+        if len(scored.distances):
+            out["eval_ot_distance"] = round(float(np.mean(scored.distances)), 5)
+        return out
+
+    def _keep_best(self) -> None:
+        """Save the policy as best_policy.msgpack if the last evaluation beats the best one."""
+        best_key = f"eval_{self.config.best_by}"
+        if self.last_eval[best_key] > self.best_eval.get(best_key, -math.inf):
+            self.best_eval = {"step": self.step, **self.last_eval}
+            self._save_policy(BEST_POLICY_FILE)
+            info = {**self.best_eval, "elapsed": self.elapsed}
+            write_json_atomic(self.run_dir / BEST_POLICY_INFO, info)
+
+    # ------------------------------------------------------------------ files and resume
+    def save_checkpoint(self) -> Path:
+        """Write the run's whole state at this episode boundary (``checkpoint.save_checkpoint``:
+        atomic; a kill at any moment leaves a complete checkpoint). The metrics are flushed
+        first, so that TensorBoard's events hold every row up to it, as metrics.csv does."""
+        if self._metrics is not None:
+            self._metrics.flush()
+        reward_state = None if self.rewarder is None else _reward_state(self.rewarder)
+        ckpt = Checkpoint(
+            step=self.step,
+            episode=self.episode,
+            elapsed=self.elapsed,
+            last_eval=self.last_eval,
+            best_eval=self.best_eval,
+            agent_state=self.state,
+            buffer=self.buffer,
+            random_states=self.random_states,
+            reward_state=reward_state,
+        )
+        return save_checkpoint(self.run_dir, ckpt)
+
+    @classmethod
+    def resume(
+        cls,
+        run_dir: str | Path,
+        *,
+        progress: bool = True,
+        steps: int | None = None,
+        hooks: LoopHooks | None = None,
+    ) -> Trainer:
+        """Reload a run from its newest checkpoint to continue it; ``steps`` may change its
+        budget, down to the steps already done.
+
+        Changes files only once the checkpoint has loaded: rows of metrics.csv logged after the
+        checkpoint are dropped when training starts (they will be logged again, as
+        TensorBoard's are hidden), what a killed checkpoint write left is removed, and a new
+        ``steps`` is written to config.json. A run killed before its first checkpoint starts
+        again from step 0 (with a warning). The returned trainer owns the run directory
+        (``RunDirInUse`` if another process does) until its ``train`` returns.
+        """
+        import warnings
+
+        run_dir = Path(run_dir)
+        raw = read_run_config(run_dir)
+        if steps is not None:
+            raw = {**raw, "steps": steps}
+        lock = RunLock(run_dir).acquire()
+        try:
+            config = config_from_dict(raw, run_dir / CONFIG_FILE)
+            trainer = cls(config, run_dir, progress=progress, hooks=hooks)
+            checkpoint = latest_checkpoint(run_dir)
+            if checkpoint is None:
+                warnings.warn(
+                    f"{run_dir} has no complete checkpoint yet: the run starts again from step 0",
+                    stacklevel=2,
+                )
+            else:
+                trainer._restore(checkpoint)
+            if trainer.step > config.steps:
+                raise ValueError(
+                    f"{run_dir} has done {trainer.step} steps already (its checkpoint): --steps "
+                    f"{config.steps} would shorten it; pass at least {trainer.step}"
+                )
+            remove_incomplete_checkpoints(run_dir)
+            if steps is not None:
+                write_json_atomic(run_dir / CONFIG_FILE, raw)
+            truncate_metrics(run_dir / "metrics.csv", trainer.step)
+        except BaseException:
+            lock.release()
+            raise
+        trainer._lock, trainer._resumed = lock, True
+        return trainer
+
+    @classmethod
+    def from_checkpoint(
+        cls, run_dir: str | Path, *, progress: bool = True, with_replay: bool = True
+    ) -> Trainer:
+        """A trainer in the state of the run's newest checkpoint; changes no file."""
+        run_dir = Path(run_dir)
+        config = config_from_dict(read_run_config(run_dir), run_dir / CONFIG_FILE)
+        checkpoint = latest_checkpoint(run_dir)
+        if checkpoint is None:
+            raise FileNotFoundError(f"{run_dir} has no checkpoint to resume from")
+        trainer = cls(config, run_dir, progress=progress)
+        trainer._restore(checkpoint, with_replay=with_replay)
+        return trainer
+
+    def _restore(self, path: Path, with_replay: bool = True) -> None:
+        """Continue from checkpoint directory ``path`` (``checkpoint.load_checkpoint``)."""
+        dims = (self.buffer.obs_dim, self.buffer.action_dim) if with_replay else None
+        ckpt = load_checkpoint(path, self.state, dims)
+        self.state = ckpt.agent_state
+        if ckpt.buffer is not None:
+            self.buffer = ckpt.buffer
+        self.step, self.episode, self.elapsed = ckpt.step, ckpt.episode, ckpt.elapsed
+        self.last_eval, self.best_eval = ckpt.last_eval, ckpt.best_eval
+        self.random_states = ckpt.random_states
+        if ckpt.reward_state is not None and self.rewarder is not None:
+            self.rewarder.load_state(ckpt.reward_state)
+
+    def _save_policy(self, name: str) -> None:
+        """The policy alone (actor parameters and observation normaliser), atomically."""
+        import flax.serialization
+
+        tmp = self.run_dir / f".{name}.tmp"
+        tmp.write_bytes(flax.serialization.to_bytes(policy_of(self.state)))
+        tmp.replace(self.run_dir / name)
+
+
+def _reward_state(reward: Any) -> Any:
+    """The reward's ``state()``; None for a plain callable (tests wrap rewards in functions)."""
+    state = getattr(reward, "state", None)
+    return None if state is None else state()
+
+
+class _StopRequest:
+    """Set by the first Ctrl-C or SIGTERM; the loop stops at the next episode boundary."""
+
+    requested = False
+
+
+@contextlib.contextmanager
+def _stop_requests() -> Iterator[_StopRequest]:
+    """The first SIGINT/SIGTERM asks the loop to checkpoint and stop after the current episode
+    (a run is consistent only between episodes); the second raises KeyboardInterrupt at once."""
+    stop = _StopRequest()
+
+    def handler(signum: int, frame: Any) -> None:
+        if stop.requested:
+            raise KeyboardInterrupt
+        stop.requested = True
+        print("\nstopping after this episode (Ctrl-C again to quit at once)", flush=True)
+
+    previous = {}
+    try:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.getsignal(sig)
+            signal.signal(sig, handler)
+    except ValueError:  # not the main thread: signals keep their default behaviour
+        previous = {}
+    try:
+        yield stop
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def _progress_bar(total: int, initial: int, enabled: bool) -> Any:
+    from tqdm import tqdm
+
+    return tqdm(
+        total=total,
+        initial=initial,
+        disable=not enabled,
+        unit="step",
+        dynamic_ncols=True,
+        smoothing=0.1,
+    )
+
+
+def _postfix(row: dict[str, Any], last_eval: dict[str, float]) -> dict[str, Any]:
+    out: dict[str, Any] = {"sps": row.get("steps_per_s"), "proxy": row.get("proxy_return")}
+    if "eval_score_norm" in last_eval:
+        out["eval"] = last_eval["eval_score_norm"]
+    elif "eval_score" in last_eval:
+        out["eval"] = last_eval["eval_score"]
+    return out

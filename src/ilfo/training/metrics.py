@@ -1,0 +1,126 @@
+"""A run's metrics: one row per episode in ``metrics.csv`` and the same scalars as TensorBoard
+events in ``tb/``, which agree on what a resumed run holds (see ``MetricsLog``)."""
+
+from __future__ import annotations
+
+import csv
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+METRIC_FIELDS = [
+    "step",
+    "episode",
+    "wall_time",
+    "steps_per_s",
+    "proxy_return",
+    "train_task_return",
+    "critic_loss",
+    "actor_loss",
+    "eval_score",
+    "eval_return",
+    "eval_score_norm",
+    "eval_return_norm",
+    "eval_ot_distance",
+]
+
+
+class MetricsLog:
+    """Appends episode rows to ``RUN/metrics.csv`` and their numbers to TensorBoard events.
+
+    ``resume_step`` (a resumed run: its checkpoint's step, after which ``truncate_metrics``
+    dropped the CSV's rows) starts the events with TensorBoard's purge marker at
+    ``resume_step + 1``, which hides the events a killed process logged after its checkpoint.
+    ``flush`` (at each checkpoint) writes the events to the file, so that a kill after a
+    checkpoint loses none logged before it (each CSV row is written when logged)."""
+
+    def __init__(self, run_dir: Path, resume_step: int | None = None) -> None:
+        self.path = Path(run_dir) / "metrics.csv"
+        self._tb_dir = Path(run_dir) / "tb"
+        self._purge_step = None if resume_step is None else resume_step + 1
+        self._tb: TensorBoardLog | None = None  # opened with the first row
+
+    def write(self, row: dict[str, Any]) -> None:
+        """Append one row (keys of ``METRIC_FIELDS``; others are ignored by the CSV)."""
+        if self._tb is None:
+            self._tb = TensorBoardLog(self._tb_dir, purge_step=self._purge_step)
+        self._tb.add_scalars(
+            {k: v for k, v in row.items() if k not in ("step", "episode")}, row["step"]
+        )
+        new = not self.path.exists()
+        with self.path.open("a", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=METRIC_FIELDS)
+            if new:
+                writer.writeheader()
+            writer.writerow({k: row.get(k, "") for k in METRIC_FIELDS})
+
+    def flush(self) -> None:
+        """Write the TensorBoard events logged so far to disk (the CSV is closed per row)."""
+        if self._tb is not None:
+            self._tb.flush()
+
+    def close(self) -> None:
+        """Flush and close the events file."""
+        if self._tb is not None:
+            self._tb.close()
+            self._tb = None
+
+
+class TensorBoardLog:
+    """Scalars to a TensorBoard events file in ``logdir``, written synchronously and flushed by
+    ``flush``: tensorboardX's SummaryWriter queues events for a thread whose flush does not wait
+    for the queue, so a kill could lose events logged before a checkpoint.
+
+    ``purge_step`` S (a resumed run: its checkpoint's step + 1) starts the file with
+    TensorBoard's session-start marker at S, which hides the events at S and after that an
+    earlier process wrote, as metrics.csv drops those rows."""
+
+    def __init__(self, logdir: Path, purge_step: int | None = None) -> None:
+        from tensorboardX.event_file_writer import EventsWriter
+        from tensorboardX.proto.event_pb2 import Event, SessionLog
+        from tensorboardX.summary import scalar
+
+        self._event, self._scalar = Event, scalar
+        logdir.mkdir(parents=True, exist_ok=True)
+        # One file per process and start: names hold the time in seconds only.
+        suffix = f".{os.getpid()}.{purge_step or 0}"
+        self._writer = EventsWriter(str(logdir / "events"), filename_suffix=suffix)
+        if purge_step is not None:
+            start = SessionLog(status=SessionLog.START)
+            event = Event(wall_time=time.time(), step=purge_step, session_log=start)
+            self._writer.write_event(event)
+
+    def add_scalars(self, values: dict[str, Any], step: int) -> None:
+        """Log every int or float of ``values`` at ``step``."""
+        now = time.time()
+        for tag, value in values.items():
+            if isinstance(value, int | float) and not isinstance(value, bool):
+                summary = self._scalar(tag, float(value))
+                self._writer.write_event(self._event(wall_time=now, step=step, summary=summary))
+
+    def flush(self) -> None:
+        """Write what was logged to the file."""
+        self._writer.flush()
+
+    def close(self) -> None:
+        """Flush and close the file."""
+        self._writer.close()
+
+
+def truncate_metrics(path: Path, step: int) -> None:
+    """Drop rows logged after the checkpoint: the resumed run writes them again."""
+    if not path.is_file():
+        return
+    with path.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=METRIC_FIELDS)
+        writer.writeheader()
+        writer.writerows(r for r in rows if int(r["step"]) <= step)
+
+
+def read_metrics(run_dir: Path) -> list[dict[str, str]]:
+    """The rows of a run's metrics.csv."""
+    with (Path(run_dir) / "metrics.csv").open(newline="") as f:
+        return list(csv.DictReader(f))

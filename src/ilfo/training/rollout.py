@@ -1,0 +1,112 @@
+"""Episodes of a policy, and the one home of the time feature.
+
+Fixed-horizon runs append remaining_steps / horizon to each observation the agent sees (the
+paper's code); ``agent_observation`` (one step) and ``agent_observations`` (a whole episode)
+are the only places that compute it: the loop, evaluation, experts and bench scripts call them.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from ilfo.agents import policy_of
+from ilfo.envs import episode_scores
+from ilfo.training.build import Agent
+
+
+def agent_observation(obs: np.ndarray, t: int, horizon: int, time_feature: bool) -> np.ndarray:
+    """What the agent sees at step ``t`` of an episode: ``obs``, with (horizon - t) / horizon
+    appended where ``time_feature``; float32."""
+    if time_feature:
+        return np.append(obs, (horizon - t) / horizon).astype(np.float32)
+    return np.asarray(obs, dtype=np.float32)
+
+
+def agent_observations(observations: np.ndarray, horizon: int, time_feature: bool) -> np.ndarray:
+    """``agent_observation`` for a whole episode's observations (T + 1, d), as one array; the
+    dtype of ``observations`` is kept (the replay buffer stores float32 itself)."""
+    if not time_feature:
+        return observations
+    remaining = (horizon - np.arange(len(observations))) / horizon
+    return np.concatenate([observations, remaining[:, None]], axis=1)
+
+
+def policy_actions(agent: Agent, policy: Any, observations: np.ndarray, horizon: int) -> np.ndarray:
+    """The deterministic actions (T, a) a policy takes along an episode's observations
+    (T + 1, d) (its last observation has no action)."""
+    obs = agent_observations(observations[:-1], horizon, agent.time_feature)
+    return np.asarray(agent.functions.act(policy_of(policy), obs.astype(np.float32)))
+
+
+class Rollout(NamedTuple):
+    """One evaluation episode: observations (T + 1, d), task rewards (T,), terminations (T,),
+    and rendered frames (empty unless asked for)."""
+
+    observations: np.ndarray
+    rewards: np.ndarray
+    env_terminated: np.ndarray
+    frames: list[np.ndarray]
+
+
+def rollout_policy(
+    env: Any, agent: Agent, state: Any, horizon: int, seed: int, render: bool = False
+) -> Rollout:
+    """A deterministic fixed-horizon episode of the agent's policy (``state``: an agent state
+    or a ``Policy``)."""
+    policy = policy_of(state)
+    obs, _ = env.reset(seed=seed)
+    observations, rewards, terminated_flags = [obs], [], []
+    frames = []
+    for t in range(horizon):
+        agent_obs = agent_observation(obs, t, horizon, agent.time_feature)
+        action = np.asarray(agent.functions.act(policy, agent_obs))
+        obs, reward, terminated, truncated, info = env.step(action.astype(np.float64))
+        if render:
+            frames.append(env.render())
+        observations.append(obs)
+        rewards.append(float(reward))
+        terminated_flags.append(bool(info.get("env_terminated", terminated)))
+        if terminated or truncated:
+            break
+    return Rollout(
+        np.asarray(observations), np.asarray(rewards), np.asarray(terminated_flags), frames
+    )
+
+
+class PolicyScores(NamedTuple):
+    """Scores of deterministic fixed-horizon episodes, one entry per episode."""
+
+    scores: np.ndarray
+    """The paper's fixed-horizon score (rewards of steps with a reported fall zeroed)."""
+    returns: np.ndarray
+    """The standard return (up to and including the first fall)."""
+    distances: np.ndarray
+    """OT distance of each episode to the probe's demo; empty without a probe."""
+    frames: list[np.ndarray]
+    """Rendered frames of the first episode, if asked for."""
+
+
+def score_policy(
+    env: Any,
+    agent: Agent,
+    state: Any,
+    horizon: int,
+    seeds: list[int],
+    distance_probe: Any = None,
+    render_first: bool = False,
+) -> PolicyScores:
+    """Roll out the deterministic policy once per seed and score each episode."""
+    scores, returns, distances, frames = [], [], [], []
+    for k, seed in enumerate(seeds):
+        rollout = rollout_policy(
+            env, agent, state, horizon, seed=seed, render=render_first and k == 0
+        )
+        frames.extend(rollout.frames)
+        fixed, standard = episode_scores(rollout.rewards, rollout.env_terminated)
+        scores.append(fixed)
+        returns.append(standard)
+        if distance_probe is not None:
+            distances.append(distance_probe(rollout.observations).distance)
+    return PolicyScores(np.array(scores), np.array(returns), np.array(distances), frames)
