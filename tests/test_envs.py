@@ -83,3 +83,35 @@ def test_a_bipedal_walker_fall_is_not_a_finish():
     assert not termination_is_finish("BipedalWalker-v3", reward)
     assert termination_is_finish("BipedalWalker-v3", 0.4)  # passing the end of the course
     assert not termination_is_finish("Hopper-v5", 0.4)  # a MuJoCo termination is a fall
+
+
+def test_the_fixed_horizon_wrappers_give_what_the_loop_computes():
+    import gymnasium as gym
+
+    from ilfo.envs import FixedHorizonScore, TimeFeature, episode_scores, make_env
+    from ilfo.training import agent_observation
+
+    horizon = 50
+    env = FixedHorizonScore(TimeFeature(make_env("Hopper-v5", True, horizon=horizon)))
+    assert env.observation_space.shape == (12,)
+    obs, _ = env.reset(seed=3)
+    plain = make_env("Hopper-v5", True, horizon=horizon)
+    plain_obs, _ = plain.reset(seed=3)
+    rng = np.random.default_rng(0)
+    rewards, terminated = [], []
+    for t in range(horizon):
+        # The env's dtype (float64 for MuJoCo); the agent sees it as float32.
+        seen = agent_observation(plain_obs, t, horizon, True)
+        np.testing.assert_array_equal(obs.astype(np.float32), seen)
+        action = rng.uniform(-1, 1, 3)
+        obs, reward, term, trunc, info = env.step(action)
+        plain_obs, _, _, _, plain_info = plain.step(action)
+        rewards.append(reward)
+        terminated.append(plain_info["env_terminated"])
+        assert not term and trunc == (t == horizon - 1)
+    assert any(terminated)  # random actions fall: the scores differ
+    expected = episode_scores(np.array(rewards), np.array(terminated))
+    assert (info["fixed_horizon_score"], info["standard_return"]) == expected
+    assert obs[-1] == 0.0
+    with pytest.raises(ValueError, match="needs a horizon"):
+        TimeFeature(gym.make("Hopper-v5", max_episode_steps=None).unwrapped)

@@ -4,9 +4,9 @@ import sys
 import numpy as np
 import pytest
 
-from ilfo import envs_bullet
 from ilfo.envs import SUPPORTED_ENVS, make_env
-from ilfo.envs_bullet import BULLET_ENVS, MINITAUR_DUCK_ENV_ID, MINITAUR_ENV_ID
+from ilfo.envs import bullet as envs_bullet
+from ilfo.envs.bullet import BULLET_ENVS, MINITAUR_DUCK_ENV_ID, MINITAUR_ENV_ID
 
 
 def test_ids_are_registered_and_supported():

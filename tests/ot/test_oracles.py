@@ -104,3 +104,18 @@ def test_greedy_splits_mass_across_expert_atoms():
     result = greedy(cost)
     np.testing.assert_allclose(result.plan, [[1 / 3, 1 / 3, 1 / 3]])
     assert result.cost == pytest.approx(1.0)
+
+
+def test_solve_dispatches_to_each_solver_by_name():
+    from ilfo.ot import emd, greedy, sinkhorn, solve
+
+    rng = np.random.default_rng(0)
+    cost = rng.random((6, 5))
+    np.testing.assert_array_equal(solve(cost).plan, sinkhorn(cost).plan)
+    np.testing.assert_array_equal(
+        solve(cost, "sinkhorn", reg=0.2).plan, sinkhorn(cost, reg=0.2).plan
+    )
+    np.testing.assert_array_equal(solve(cost, "emd").plan, emd(cost).plan)
+    np.testing.assert_array_equal(solve(cost, "greedy").plan, greedy(cost).plan)
+    with pytest.raises(ValueError, match="solver must be one of sinkhorn, emd, greedy"):
+        solve(cost, "auction")

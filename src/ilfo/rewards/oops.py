@@ -14,7 +14,7 @@ from typing import Literal
 
 import numpy as np
 
-from ilfo.ot import METRICS, Metric, OTResult, cost_matrix, emd, greedy, sinkhorn
+from ilfo.ot import METRICS, SOLVERS, Metric, OTResult, Solver, cost_matrix, solve
 from ilfo.rewards.base import (
     Atoms,
     RewardOutput,
@@ -25,7 +25,6 @@ from ilfo.rewards.base import (
     make_atoms,
 )
 
-Solver = Literal["sinkhorn", "emd", "greedy"]
 DemoSelection = Literal["random", "pooled", "nearest"]
 
 
@@ -70,7 +69,7 @@ class OOPSConfig:
             raise ValueError(f"atoms must be 'transitions' or 'states', got {self.atoms!r}")
         if self.metric not in METRICS:
             raise ValueError(f"unknown metric {self.metric!r}; choose one of {', '.join(METRICS)}")
-        if self.solver not in ("sinkhorn", "emd", "greedy"):
+        if self.solver not in SOLVERS:
             raise ValueError(f"solver must be sinkhorn, emd or greedy, got {self.solver!r}")
         if self.demo_selection not in ("random", "pooled", "nearest"):
             raise ValueError(
@@ -148,14 +147,10 @@ class OOPS:
     def _solve(self, learner: np.ndarray, expert: np.ndarray, key: int) -> OTResult:
         cfg = self.config
         cost = cost_matrix(learner, expert, cfg.metric)
-        if cfg.solver == "emd":
-            return emd(cost)
-        if cfg.solver == "greedy":
-            return greedy(cost)
         init = self._potentials.get(key) if cfg.warm_start else None
         if init is not None and init[0].shape[0] != cost.shape[0]:
             init = None  # a learner episode of another length: nothing to reuse
-        result = sinkhorn(cost, reg=cfg.reg, tol=cfg.tol, max_iter=cfg.max_iter, init=init)
-        if cfg.warm_start and result.converged:
+        result = solve(cost, cfg.solver, reg=cfg.reg, tol=cfg.tol, max_iter=cfg.max_iter, init=init)
+        if cfg.warm_start and cfg.solver == "sinkhorn" and result.converged:
             self._potentials[key] = (result.f, result.g)
         return result

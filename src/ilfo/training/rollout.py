@@ -1,8 +1,10 @@
 """Episodes of a policy, and the one home of the time feature.
 
-Fixed-horizon runs append remaining_steps / horizon to each observation the agent sees (the
-paper's code); ``agent_observation`` (one step) and ``agent_observations`` (a whole episode)
-are the only places that compute it: the loop, evaluation, experts and bench scripts call them.
+Fixed-horizon runs append the time feature, remaining_steps / horizon
+(``ilfo.envs.time_feature``), to each observation the agent sees (the paper's code);
+``agent_observation`` (one step) and ``agent_observations`` (a whole episode) are what the loop,
+evaluation, experts and bench scripts call, and ``ilfo.envs.TimeFeature`` gives the same
+observations to other people's RL code.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ilfo import envs
 from ilfo.agents import policy_of
 from ilfo.envs import episode_scores
 from ilfo.training.build import Agent
@@ -20,7 +23,7 @@ def agent_observation(obs: np.ndarray, t: int, horizon: int, time_feature: bool)
     """What the agent sees at step ``t`` of an episode: ``obs``, with (horizon - t) / horizon
     appended where ``time_feature``; float32."""
     if time_feature:
-        return np.append(obs, (horizon - t) / horizon).astype(np.float32)
+        return np.append(obs, envs.time_feature(t, horizon)).astype(np.float32)
     return np.asarray(obs, dtype=np.float32)
 
 
@@ -29,7 +32,7 @@ def agent_observations(observations: np.ndarray, horizon: int, time_feature: boo
     dtype of ``observations`` is kept (the replay buffer stores float32 itself)."""
     if not time_feature:
         return observations
-    remaining = (horizon - np.arange(len(observations))) / horizon
+    remaining = envs.time_feature(np.arange(len(observations)), horizon)
     return np.concatenate([observations, remaining[:, None]], axis=1)
 
 

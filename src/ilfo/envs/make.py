@@ -1,22 +1,22 @@
-"""Environments: ``make_env`` for the paper's gymnasium tasks, in fixed-horizon or standard mode.
+"""``make_env`` for the paper's gymnasium tasks, in fixed-horizon or standard mode.
 
 Fixed-horizon mode (the paper's code) runs every episode to its full length: a termination the
 environment reports is recorded in ``info["env_terminated"]`` and the episode goes on; only the
 time limit ends it. Standard mode is plain gymnasium: an episode ends at termination (no
 bootstrapping) or truncation (bootstrapping continues).
 
-PyBullet's Minitaur and MinitaurDuck (:mod:`ilfo.envs_bullet`, registered here) need the optional
+PyBullet's Minitaur and MinitaurDuck (:mod:`ilfo.envs.bullet`, registered here) need the optional
 extra: ``pip install -e ".[bullet]"``.
 """
 
 from __future__ import annotations
 
-from typing import Any, SupportsFloat
+from typing import Any
 
 import gymnasium as gym
-import numpy as np
 
-from ilfo.envs_bullet import BULLET_ENVS, register_bullet_envs
+from ilfo.envs.bullet import BULLET_ENVS, register_bullet_envs
+from ilfo.envs.wrappers import IgnoreTermination
 
 register_bullet_envs()  # the Minitaur ids; pybullet itself is imported only by their make
 
@@ -34,16 +34,6 @@ SUPPORTED_ENVS: tuple[str, ...] = (
 
 HEALTHY_ANGLE_ENVS: tuple[str, ...] = ("Hopper-v5", "Walker2d-v5")
 """Envs whose torso must stay in a healthy angle range (``make_env``'s ``healthy_angle_range``)."""
-
-
-class IgnoreTermination(gym.Wrapper):
-    """Turns ``terminated`` into ``info["env_terminated"] = True`` so the episode goes on."""
-
-    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        info = dict(info)
-        info["env_terminated"] = bool(terminated)
-        return obs, reward, False, truncated, info
 
 
 def make_env(
@@ -121,22 +111,3 @@ def termination_is_finish(env_id: str, reward: float) -> bool:
     Every termination of the MuJoCo and Minitaur tasks is a fall (unhealthy state)."""
     fall_reward = _FALL_REWARD.get(env_id)
     return fall_reward is not None and float(reward) != fall_reward
-
-
-def episode_scores(rewards: np.ndarray, env_terminated: np.ndarray) -> tuple[float, float]:
-    """Both scores of one fixed-horizon episode: (fixed-horizon score, standard return).
-
-    The fixed-horizon score (the paper's) sums the task reward over the whole horizon with the
-    reward of every step on which the environment reported termination set to 0. The standard
-    return sums rewards up to and including the first termination, as a standard episode would.
-
-    Args:
-        rewards: Task rewards, shape (T,).
-        env_terminated: Whether the environment reported termination at each step, shape (T,).
-    """
-    rewards = np.asarray(rewards, dtype=np.float64)
-    env_terminated = np.asarray(env_terminated, dtype=bool)
-    fixed = float(np.where(env_terminated, 0.0, rewards).sum())
-    hits = np.flatnonzero(env_terminated)
-    end = hits[0] + 1 if hits.size else len(rewards)
-    return fixed, float(rewards[:end].sum())

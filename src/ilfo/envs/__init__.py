@@ -1,0 +1,25 @@
+"""Environments: the paper's tasks (``make_env``), PyBullet's Minitaur tasks (``bullet``), and
+the fixed-horizon protocol as plain gymnasium wrappers (``wrappers``) for any RL code."""
+
+from ilfo.envs.bullet import BULLET_ENVS
+from ilfo.envs.make import HEALTHY_ANGLE_ENVS, SUPPORTED_ENVS, make_env, termination_is_finish
+from ilfo.envs.wrappers import (
+    FixedHorizonScore,
+    IgnoreTermination,
+    TimeFeature,
+    episode_scores,
+    time_feature,
+)
+
+__all__ = [
+    "BULLET_ENVS",
+    "HEALTHY_ANGLE_ENVS",
+    "SUPPORTED_ENVS",
+    "FixedHorizonScore",
+    "IgnoreTermination",
+    "TimeFeature",
+    "episode_scores",
+    "make_env",
+    "termination_is_finish",
+    "time_feature",
+]
