@@ -15,8 +15,8 @@ from ilfo.algos import AGENT_PARTS, ALGOS, PART_CONFIGS, Recipe, algos_using, re
 from ilfo.config import dataclass_from_dict
 from ilfo.rewards import OOPSConfig, PWILConfig
 
-Algo = Literal["oops-td3", "oops-ddpg", "oops-sac", "pwil-td3", "td3", "sac"]
-"""The names of ``ilfo.algos.ALGOS`` (the CLI's ``--algo`` choices; a test keeps them equal)."""
+Algo = Literal[tuple(ALGOS)]  # type: ignore[valid-type]
+"""The names of ``ilfo.algos.ALGOS``, made from the registry (the CLI's ``--algo`` choices)."""
 
 
 @dataclass(frozen=True)
@@ -26,8 +26,8 @@ class TrainConfig:
     env: str = "Hopper-v5"
     """Gymnasium environment id."""
     algo: Algo = "oops-td3"
-    """The algorithm (``ilfo.algos.ALGOS``): oops-td3, oops-ddpg, oops-sac, pwil-td3, or
-    td3 / sac on the true task reward (no demos)."""
+    """The algorithm, a recipe of ``ilfo.algos`` (its agent and reward); td3 and sac learn from
+    the true task reward (no demos)."""
     demos: str | None = None
     """Demonstration file (.npz); omit it (None) for the env's shipped expert demos
     (data/experts/<env>/demos.npz)."""
