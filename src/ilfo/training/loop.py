@@ -417,27 +417,13 @@ class Trainer:
         trainer._lock, trainer._resumed = lock, True
         return trainer
 
-    @classmethod
-    def from_checkpoint(
-        cls, run_dir: str | Path, *, progress: bool = True, with_replay: bool = True
-    ) -> Trainer:
-        """A trainer in the state of the run's newest checkpoint; changes no file."""
-        run_dir = Path(run_dir)
-        config = config_from_dict(read_run_config(run_dir), run_dir / CONFIG_FILE)
-        checkpoint = latest_checkpoint(run_dir)
-        if checkpoint is None:
-            raise FileNotFoundError(f"{run_dir} has no checkpoint to resume from")
-        trainer = cls(config, run_dir, progress=progress)
-        trainer._restore(checkpoint, with_replay=with_replay)
-        return trainer
-
-    def _restore(self, path: Path, with_replay: bool = True) -> None:
-        """Continue from checkpoint directory ``path`` (``checkpoint.load_checkpoint``)."""
-        dims = (self.buffer.obs_dim, self.buffer.action_dim) if with_replay else None
+    def _restore(self, path: Path) -> None:
+        """Continue from checkpoint directory ``path`` (``checkpoint.load_checkpoint``); to read
+        a run without continuing it, see ``run_dir.load_run_policy``."""
+        dims = (self.buffer.obs_dim, self.buffer.action_dim)
         ckpt = load_checkpoint(path, self.state, dims)
-        self.state = ckpt.agent_state
-        if ckpt.buffer is not None:
-            self.buffer = ckpt.buffer
+        assert ckpt.buffer is not None
+        self.state, self.buffer = ckpt.agent_state, ckpt.buffer
         self.step, self.episode, self.elapsed = ckpt.step, ckpt.episode, ckpt.elapsed
         self.last_eval, self.best_eval = ckpt.last_eval, ckpt.best_eval
         self.random_states = ckpt.random_states
