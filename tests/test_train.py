@@ -146,10 +146,24 @@ def test_cli_shows_a_warning_as_one_line(tmp_path, capsys):
 
 
 def test_cli_errors(tmp_path, capsys):
-    assert main(["train", "--demos", str(tmp_path / "missing.npz"), "--no-progress"]) == 2
+    assert (
+        main(
+            [
+                "train",
+                "--demos",
+                str(tmp_path / "missing.npz"),
+                "--no-progress",
+                "--out",
+                str(tmp_path / "runs"),
+            ]
+        )
+        == 2
+    )
     assert "no demonstration file" in capsys.readouterr().err
-    assert main(["train", "--env", "NoSuchEnv-v0", "--no-progress"]) == 2
+    out = ["--out", str(tmp_path / "runs")]
+    assert main(["train", "--env", "NoSuchEnv-v0", "--no-progress", *out]) == 2
     assert "unknown environment" in capsys.readouterr().err
+    assert not list((tmp_path / "runs").iterdir())  # a failed start leaves no run directory
     assert main(["train", "--resume", str(tmp_path)]) == 2
     assert "not a run directory" in capsys.readouterr().err
     assert main(["train", "--steps", "0", "--demos", DEMOS]) == 2

@@ -158,7 +158,11 @@ def _run_train(args: argparse.Namespace) -> int:
             },
         )
         run_dir = create_run_dir(config.out, run_name(config))  # new and empty, never shared
-        trainer = Trainer(config, run_dir, progress=not args.no_progress)
+        try:
+            trainer = Trainer(config, run_dir, progress=not args.no_progress)
+        except BaseException:
+            run_dir.rmdir()  # nothing was written: a failed start leaves no directory behind
+            raise
     trainer.resume_command = f"{_command()} train --resume {shlex.quote(str(trainer.run_dir))}"
     print(f"run directory: {trainer.run_dir}")
     print(trainer.checkpoint_plan())
