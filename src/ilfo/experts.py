@@ -114,12 +114,12 @@ def export_expert(
     if which not in ("best", "latest"):
         raise ValueError(f"which must be 'best' or 'latest', got {which!r}")
     run_dir = Path(run_dir)
-    run = load_run_policy(run_dir, "latest")  # the checkpoint's counters, and a fallback
     best_info = run_dir / BEST_POLICY_INFO
     if which == "best" and best_info.is_file():
         run = load_run_policy(run_dir, "best")
         chosen = {"policy": "best", **json.loads(best_info.read_text())}
-    else:
+    else:  # the newest checkpoint's policy, step and evaluation
+        run = load_run_policy(run_dir, "latest")
         ckpt = run.checkpoint
         assert ckpt is not None  # "latest" reads a checkpoint
         chosen = {"policy": "latest", "step": ckpt.step, "elapsed": ckpt.elapsed, **ckpt.last_eval}

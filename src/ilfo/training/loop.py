@@ -16,6 +16,7 @@ import dataclasses
 import math
 import signal
 import time
+import warnings
 from collections.abc import Iterator
 from contextlib import AbstractContextManager
 from pathlib import Path
@@ -384,8 +385,6 @@ class Trainer:
         again from step 0 (with a warning). The returned trainer owns the run directory
         (``RunDirInUse`` if another process does) until its ``train`` returns.
         """
-        import warnings
-
         run_dir = Path(run_dir)
         raw = read_run_config(run_dir)
         if steps is not None:
