@@ -1,8 +1,10 @@
 """The algorithm registry: what ``--algo`` names, and the parts each algorithm is built from.
 
-An algorithm is a ``Recipe``: an agent part (``td3``, ``sac``) and a reward part (``oops``,
-``pwil``, or none for the task reward), with an optional change to the agent's config (DDPG is
-a TD3 config). Parts are registered once in ``AGENT_PARTS`` and ``REWARD_PARTS``: the config
+An algorithm is a ``Recipe``: an agent part (``td3``, ``sac``) and a reward part (an episode
+reward: ``oops``, ``pwil``; a learned reward: ``discriminator``; or none for the task reward),
+with an optional change to the agent's config (DDPG is a TD3 config) and an optional default
+agent config of its own (the baselines' authors' settings). Parts are registered once in
+``AGENT_PARTS`` and ``REWARD_PARTS``: the config
 type, the factory, the defaults, and what the trainer sets itself. Everything that depends on
 the list of algorithms reads it from here: ``TrainConfig``'s validation, the CLI's ``--algo``
 choices and its flag groups, and the builders in ``ilfo.training.build``.
@@ -22,7 +24,16 @@ from typing import Any
 import numpy as np
 
 from ilfo.agents import SACConfig, TD3Config, ddpg_config, make_sac, make_td3
-from ilfo.rewards import OOPS, PWIL, EpisodeReward, OOPSConfig, PWILConfig
+from ilfo.rewards import (
+    OOPS,
+    PWIL,
+    Discriminator,
+    DiscriminatorConfig,
+    EpisodeReward,
+    LearnedReward,
+    OOPSConfig,
+    PWILConfig,
+)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -51,6 +62,10 @@ class AgentPart(Part):
     for_run: Callable[[Any, int, bool], Any]
     """``for_run(config, horizon, fixed_horizon)`` -> the config as a run uses it (what the
     trainer sets: see ``set_by_trainer``)."""
+    make_learning: Callable[..., Any] | None = None
+    """``make_learning(config, obs_dim, action_dim, max_action, reward, expert, schedule,
+    time_feature)`` -> the agent's functions trained on a ``LearnedReward`` (see
+    ``ilfo.training.learned``); None: the agent cannot use one."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -59,6 +74,16 @@ class RewardPart(Part):
 
     make: Callable[[Sequence[np.ndarray], Any], EpisodeReward]
     """``make(demos, config)`` -> the reward; demos are observation arrays (T_i + 1, obs_dim)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class LearnedRewardPart(Part):
+    """A reward learned during training (``LearnedReward``), queried inside the agent's update."""
+
+    make: Callable[[Any], LearnedReward]
+    """``make(config)`` -> the reward."""
+    schedule: Callable[[Any], Any]
+    """``schedule(config)`` -> its ``RewardSchedule`` (when it takes gradient steps)."""
 
 
 @dataclass(frozen=True)
@@ -75,11 +100,19 @@ class Recipe:
     """One line for ``--help`` and the docs."""
     adapt_agent: Callable[[Any], Any] | None = None
     """A change applied to the agent's config after the run's (e.g. ``ddpg_config``)."""
+    agent_default: Callable[[], Any] | None = None
+    """The agent's config where none is given, instead of the agent part's preset default
+    (a baseline's authors' settings); flags change single settings of it."""
 
     @property
     def imitation(self) -> bool:
         """Whether it learns from demonstrations (a reward part) rather than the task reward."""
         return self.reward is not None
+
+    @property
+    def learned(self) -> bool:
+        """Whether its reward is learned during training (a ``LearnedRewardPart``)."""
+        return self.reward is not None and isinstance(REWARD_PARTS[self.reward], LearnedRewardPart)
 
 
 def _td3_default(preset: str) -> TD3Config:
@@ -94,10 +127,33 @@ def _td3_for_run(config: TD3Config, horizon: int, fixed_horizon: bool) -> TD3Con
     )
 
 
+def _td3_learning(config: TD3Config, obs_dim, action_dim, max_action, reward, expert, schedule,
+                  time_feature):  # fmt: skip
+    from ilfo.training.learned import with_learned_reward
+
+    agent = make_td3(config, obs_dim, action_dim, max_action)
+    return with_learned_reward(agent, reward, expert, schedule, time_feature)
+
+
+def _dacfo_td3() -> TD3Config:
+    """The TD3 of the DACfO authors' code (opolo-code ``td3dacfo.py``, ``td3dacfo.yml``):
+    400-300 ReLU networks (Glorot initialisation), batch 100, Adam 3e-4, tau 0.005, exploration
+    noise 0.1, target smoothing 0.2 clipped at 0.5, policy delay 2, MSE loss, no time
+    augmentation."""
+    return TD3Config(
+        actor_hidden=(400, 300),
+        critic_hidden=(400, 300),
+        batch_size=100,
+        exploration_noise=0.1,
+        init_scheme="glorot",
+    )
+
+
 AGENT_PARTS: dict[str, AgentPart] = {
     "td3": AgentPart(
         config=TD3Config,
         make=make_td3,
+        make_learning=_td3_learning,
         default=_td3_default,
         for_run=_td3_for_run,
         title="TD3/DDPG agent",
@@ -121,7 +177,14 @@ AGENT_PARTS: dict[str, AgentPart] = {
 }
 """The agents, by the name of their ``TrainConfig`` field."""
 
-REWARD_PARTS: dict[str, RewardPart] = {
+
+def _discriminator_schedule(config: DiscriminatorConfig) -> Any:
+    from ilfo.training.learned import RewardSchedule
+
+    return RewardSchedule(config.update_every, config.updates)
+
+
+REWARD_PARTS: dict[str, RewardPart | LearnedRewardPart] = {
     "oops": RewardPart(
         config=OOPSConfig,
         make=OOPS,
@@ -136,14 +199,28 @@ REWARD_PARTS: dict[str, RewardPart] = {
         title="PWIL rewarder",
         description="Defaults: the paper's.",
     ),
+    "discriminator": LearnedRewardPart(
+        config=DiscriminatorConfig,
+        make=Discriminator,
+        schedule=_discriminator_schedule,
+        title="(s, s') discriminator reward",
+        description="Defaults: the OPOLO authors' code (MuJoCo).",
+    ),
 }
-"""The episode rewards, by the name of their ``TrainConfig`` field."""
+"""The imitation rewards (episode and learned), by the name of their ``TrainConfig`` field."""
 
 RECIPES: tuple[Recipe, ...] = (
     Recipe("oops-td3", "td3", "oops", "OOPS reward + TD3 with the PAL critic loss (the paper)"),
     Recipe("oops-ddpg", "td3", "oops", "OOPS reward + DDPG", adapt_agent=ddpg_config),
     Recipe("oops-sac", "sac", "oops", "OOPS reward + SAC"),
     Recipe("pwil-td3", "td3", "pwil", "PWIL-(s) reward + TD3 (the paper's PWIL baseline)"),
+    Recipe(
+        "gaifo-td3",
+        "td3",
+        "discriminator",
+        "GAIfO/DACfO: an (s, s') discriminator's reward + TD3 (the OPOLO authors' td3dacfo)",
+        agent_default=_dacfo_td3,
+    ),
     Recipe("td3", "td3", None, "TD3 on the task reward (no demos)"),
     Recipe("sac", "sac", None, "SAC on the task reward (no demos; ilfo's experts)"),
 )

@@ -192,7 +192,7 @@ def load_expert(path: str | Path) -> ExpertPolicy:
         raise ValueError(f"{record_path} is not a readable expert record ({err})") from None
     config = config_from_dict(raw_config, record_path)
     env = make_env(config.env, True, horizon=horizon)
-    agent = make_agent(config, env_info(env, config.env))
+    agent = make_agent(config, env_info(env, config.env), demos=None)
     template = policy_of(agent.functions.init(config.seed))
     policy = load_msgpack(template, path / POLICY_FILE, "expert policy")
     return ExpertPolicy(config, agent, policy, horizon)

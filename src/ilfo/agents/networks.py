@@ -41,15 +41,19 @@ __all__ = [
 
 _LOG_2 = math.log(2.0)
 
-InitName = Literal["flax", "torch"]
+InitName = Literal["flax", "torch", "glorot"]
+Activation = Literal["relu", "tanh"]
+_ACTIVATIONS = {"relu": nn.relu, "tanh": nn.tanh}
 
 
 def dense(features: int, fan_in: int, init_scheme: InitName) -> nn.Dense:
     """A dense layer initialised as ``init_scheme`` says (see the module docstring)."""
     if init_scheme == "flax":
         return nn.Dense(features)
+    if init_scheme == "glorot":  # TensorFlow's default (the OPOLO authors' code)
+        return nn.Dense(features, kernel_init=nn.initializers.xavier_uniform())
     if init_scheme != "torch":
-        raise ValueError(f"init_scheme must be 'flax' or 'torch', got {init_scheme!r}")
+        raise ValueError(f"init_scheme must be 'flax', 'torch' or 'glorot', got {init_scheme!r}")
     bound = 1.0 / fan_in**0.5
 
     def bias_init(key: jax.Array, shape: Sequence[int], dtype=jnp.float32) -> jax.Array:
@@ -61,7 +65,7 @@ def dense(features: int, fan_in: int, init_scheme: InitName) -> nn.Dense:
 
 
 class MLP(nn.Module):
-    """ReLU multilayer perceptron with a linear output layer.
+    """Multilayer perceptron (ReLU or tanh hidden layers) with a linear output layer.
 
     x (..., in_dim) -> (..., out_dim).
     """
@@ -69,11 +73,13 @@ class MLP(nn.Module):
     hidden: Sequence[int]
     out_dim: int
     init_scheme: InitName = "flax"
+    activation: Activation = "relu"
 
     @nn.compact
     def __call__(self, x: jax.Array) -> jax.Array:
+        act = _ACTIVATIONS[self.activation]
         for width in self.hidden:
-            x = nn.relu(dense(width, x.shape[-1], self.init_scheme)(x))
+            x = act(dense(width, x.shape[-1], self.init_scheme)(x))
         return dense(self.out_dim, x.shape[-1], self.init_scheme)(x)
 
 

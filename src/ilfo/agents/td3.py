@@ -42,14 +42,17 @@ from ilfo.replay import ReplayData
 
 __all__ = [
     "TD3",
+    "ActorTerm",
     "TD3Config",
     "TD3State",
     "augment_time",
     "critic_loss",
     "ddpg_config",
+    "delayed_updates",
     "make_td3",
     "pal_loss",
     "redraw_next_time",
+    "td3_metrics",
 ]
 
 Params = Any
@@ -108,15 +111,17 @@ class TD3Config:
     shared/design/reference-notes.md describes it)."""
     init_scheme: InitName = "torch"
     """Network initialisation: "torch" (PyTorch's nn.Linear default, uniform +-1/sqrt(fan_in)
-    for weights and biases, as the paper's and Fujimoto's code) or "flax" (LeCun normal, zero
-    biases)."""
+    for weights and biases, as the paper's and Fujimoto's code), "flax" (LeCun normal, zero
+    biases) or "glorot" (Glorot uniform, zero biases: TensorFlow's, as the OPOLO code)."""
     max_time: int = 1000
     """Scale of the time feature and the largest time-to-go drawn by augmentation (the horizon);
     set by the trainer to the episode horizon in ``ilfo train``."""
 
     def __post_init__(self) -> None:
-        if self.init_scheme not in ("flax", "torch"):
-            raise ValueError(f"init_scheme must be 'flax' or 'torch', got {self.init_scheme!r}")
+        if self.init_scheme not in ("flax", "torch", "glorot"):
+            raise ValueError(
+                f"init_scheme must be 'flax', 'torch' or 'glorot', got {self.init_scheme!r}"
+            )
         if self.time_augmentation_scheme not in ("finite_horizon", "next_only"):
             raise ValueError(
                 "time_augmentation_scheme must be 'finite_horizon' or 'next_only', got "
@@ -221,6 +226,11 @@ class TD3(NamedTuple):
     deterministic; else Gaussian exploration noise, clipped to [-max_action, max_action]."""
     update: Callable[..., tuple[TD3State, dict[str, jax.Array]]]
     """update(state, data: ReplayData, size, num_updates) -> (state, metrics)."""
+    update_step: Callable[..., tuple[TD3State, tuple[jax.Array, ...]]]
+    """update_step(state, batch, key, train_actor=None, actor_term=None) -> (state, outputs):
+    one update on one batch, not jitted, for updates that wrap it (a learned reward relabels
+    ``batch.reward`` first; ``actor_term`` adds to the actor loss: ``ActorTerm``). Outputs:
+    (critic loss, actor loss, mean Q, actor trained); ``td3_metrics`` reduces them."""
     set_normalizer: Callable[[TD3State, ArrayLike, ArrayLike], TD3State]
     """set_normalizer(state, mean, std) -> state; allowed once."""
     q_values: Callable[[TD3State, jax.Array, jax.Array], jax.Array]
@@ -297,6 +307,207 @@ def redraw_next_time(key: jax.Array, next_obs: jax.Array, max_time: int) -> jax.
     return next_obs.at[..., -1].set(k / max_time)
 
 
+class _Networks(NamedTuple):
+    """TD3's modules and optimisers, built once from the config (static)."""
+
+    actor: DeterministicActor
+    critic: CriticEnsemble
+    first_critic: CriticEnsemble
+    """The first critic alone (the actor loss's Q): parameters sliced from the ensemble."""
+    actor_opt: optax.GradientTransformation
+    critic_opt: optax.GradientTransformation
+    max_action: float
+
+
+ActorTerm = Callable[[Callable[[jax.Array], jax.Array]], jax.Array]
+"""An extra actor-loss term: ``term(policy) -> scalar``, where ``policy(obs) -> action`` applies
+the actor being trained (observations raw: normalised inside) and is differentiable in its
+parameters. A recipe builds it per update from its own inputs (e.g. OPOLO's inverse-dynamics
+actions of expert transitions)."""
+
+
+def _init_state(nets: _Networks, obs_dim: int, action_dim: int, seed: int) -> TD3State:
+    key, k_actor, k_critic = jax.random.split(jax.random.PRNGKey(seed), 3)
+    obs = jnp.zeros((1, obs_dim), jnp.float32)
+    action = jnp.zeros((1, action_dim), jnp.float32)
+    actor_params = nets.actor.init(k_actor, obs)
+    critic_params = nets.critic.init(k_critic, obs, action)
+    return TD3State(
+        actor_params=actor_params,
+        critic_params=critic_params,
+        actor_target=actor_params,
+        critic_target=critic_params,
+        actor_opt_state=nets.actor_opt.init(actor_params),
+        critic_opt_state=nets.critic_opt.init(critic_params),
+        obs_mean=jnp.zeros(obs_dim, jnp.float32),
+        obs_std=jnp.ones(obs_dim, jnp.float32),
+        normalizer_set=jnp.array(False),
+        step=jnp.array(0, jnp.int32),
+        key=key,
+    )
+
+
+def _normalize(state: TD3State | Policy, obs: jax.Array) -> jax.Array:
+    return (obs - state.obs_mean) / state.obs_std
+
+
+def _critic_inputs(
+    cfg: TD3Config, batch: ReplayData, key: jax.Array
+) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """The critic's (obs, next_obs, not_done) of a batch, time-augmented as configured."""
+    if cfg.time_augmentation and cfg.time_augmentation_scheme == "next_only":
+        return batch.obs, redraw_next_time(key, batch.next_obs, cfg.max_time), batch.not_done
+    if cfg.time_augmentation:  # "finite_horizon"
+        return augment_time(key, batch.obs, batch.next_obs, cfg.max_time)
+    return batch.obs, batch.next_obs, batch.not_done
+
+
+def _critic_step(
+    nets: _Networks, cfg: TD3Config, state: TD3State, batch: ReplayData, key: jax.Array
+) -> tuple[Params, optax.OptState, jax.Array, jax.Array]:
+    """One critic update: TD target from the target networks with target policy smoothing.
+    Returns (critic_params, critic_opt_state, loss, mean Q)."""
+    k_noise, k_time = jax.random.split(key)
+    critic_obs, next_obs, not_done = _critic_inputs(cfg, batch, k_time)
+    critic_obs_n = _normalize(state, critic_obs)
+    next_obs_n = _normalize(state, next_obs)
+    max_action = nets.max_action
+    next_action = nets.actor.apply(state.actor_target, next_obs_n)
+    if cfg.target_noise > 0:
+        noise = jax.random.normal(k_noise, next_action.shape) * (cfg.target_noise * max_action)
+        noise = jnp.clip(noise, -cfg.noise_clip * max_action, cfg.noise_clip * max_action)
+        next_action = jnp.clip(next_action + noise, -max_action, max_action)
+    next_q = jnp.min(nets.critic.apply(state.critic_target, next_obs_n, next_action), axis=0)
+    target = jax.lax.stop_gradient(batch.reward + cfg.gamma * not_done * next_q)
+
+    def loss_fn(params: Params) -> tuple[jax.Array, jax.Array]:
+        q = nets.critic.apply(params, critic_obs_n, batch.action)  # (num_critics, B)
+        loss = critic_loss(q - target, cfg.loss, cfg.pal_alpha, cfg.pal_min_priority)
+        return loss, jnp.mean(q)
+
+    (loss, q_mean), grads = jax.value_and_grad(loss_fn, has_aux=True)(state.critic_params)
+    updates, opt_state = nets.critic_opt.update(grads, state.critic_opt_state, state.critic_params)
+    return optax.apply_updates(state.critic_params, updates), opt_state, loss, q_mean
+
+
+def _actor_step(
+    nets: _Networks,
+    cfg: TD3Config,
+    state: TD3State,
+    critic_params: Params,
+    obs: jax.Array,
+    actor_term: ActorTerm | None,
+) -> tuple[Params, optax.OptState, Params, Params, jax.Array]:
+    """The delayed actor update (maximise the first critic's Q at the recorded time, plus
+    ``actor_term``) and the targets' Polyak step. Returns (actor_params, actor_opt_state,
+    actor_target, critic_target, actor loss)."""
+    obs_n = _normalize(state, obs)
+    q1_params = jax.tree.map(lambda p: p[:1], critic_params)
+
+    def loss_fn(params: Params) -> jax.Array:
+        action = nets.actor.apply(params, obs_n)
+        loss = -jnp.mean(nets.first_critic.apply(q1_params, obs_n, action))
+        if actor_term is not None:
+            loss = loss + actor_term(lambda o: nets.actor.apply(params, _normalize(state, o)))
+        return loss
+
+    loss, grads = jax.value_and_grad(loss_fn)(state.actor_params)
+    updates, opt_state = nets.actor_opt.update(grads, state.actor_opt_state, state.actor_params)
+    actor_params = optax.apply_updates(state.actor_params, updates)
+    actor_target = optax.incremental_update(actor_params, state.actor_target, cfg.tau)
+    critic_target = optax.incremental_update(critic_params, state.critic_target, cfg.tau)
+    return actor_params, opt_state, actor_target, critic_target, loss
+
+
+def _update_step(
+    nets: _Networks,
+    cfg: TD3Config,
+    state: TD3State,
+    batch: ReplayData,
+    key: jax.Array,
+    train_actor: bool | None = None,
+    actor_term: ActorTerm | None = None,
+) -> tuple[TD3State, tuple[jax.Array, jax.Array, jax.Array, jax.Array]]:
+    """One critic update and, every ``policy_delay``-th update (Fujimoto: on update numbers
+    delay, 2 * delay, ...), the actor's and the targets'. ``train_actor``: None decides by
+    ``state.step`` at run time (a ``cond``); True / False fixes it. Returns the new state and
+    (critic loss, actor loss (0 where not trained), mean Q, whether the actor was trained)."""
+    critic_params, critic_opt_state, c_loss, q_mean = _critic_step(nets, cfg, state, batch, key)
+
+    def actor_step(_: None):
+        return _actor_step(nets, cfg, state, critic_params, batch.obs, actor_term)
+
+    def skip(_: None):
+        kept = (state.actor_params, state.actor_opt_state, state.actor_target, state.critic_target)
+        return (*kept, jnp.zeros((), jnp.float32))
+
+    if train_actor is None:
+        do_actor = (state.step + 1) % cfg.policy_delay == 0
+        outs = jax.lax.cond(do_actor, actor_step, skip, None)
+    else:
+        do_actor = jnp.array(train_actor)
+        outs = actor_step(None) if train_actor else skip(None)
+    actor_params, actor_opt_state, actor_target, critic_target, a_loss = outs
+    new_state = state.replace(
+        actor_params=actor_params,
+        critic_params=critic_params,
+        actor_target=actor_target,
+        critic_target=critic_target,
+        actor_opt_state=actor_opt_state,
+        critic_opt_state=critic_opt_state,
+        step=state.step + 1,
+    )
+    return new_state, (c_loss, a_loss, q_mean, do_actor)
+
+
+def delayed_updates(
+    update_step: Callable[..., tuple[Any, Any]],
+    policy_delay: int,
+    updates_done: jax.Array,
+    state: Any,
+    data: ReplayData,
+    size: jax.Array | int,
+    num_updates: int,
+    batch_size: int,
+) -> tuple[Any, Any]:
+    """``num_updates`` applications of ``update_step(state, batch, key, train_actor=...)`` in
+    one ``lax.scan`` (batches and keys as ``scan_updates`` draws them), the actor trained on
+    every ``policy_delay``-th update counting from ``updates_done`` (the updates before these).
+
+    Whole groups of ``policy_delay`` updates, the actor trained in the last, need no run-time
+    ``cond`` (which XLA schedules poorly on a CPU); they apply when the count is aligned with
+    the delay (always with delay 1; with 2, when every episode is of even length); otherwise
+    each update decides with a ``cond`` (``train_actor=None``). Used by TD3's ``update`` and by
+    updates that wrap TD3's step (``ilfo.training.learned``)."""
+    delay = policy_delay
+    group = [functools.partial(update_step, train_actor=False)] * (delay - 1)
+    group.append(functools.partial(update_step, train_actor=True))
+
+    def grouped(state: Any):
+        return scan_update_groups(group, state, data, size, num_updates // delay, batch_size)
+
+    def one_by_one(state: Any):
+        return scan_updates(update_step, state, data, size, num_updates, batch_size)
+
+    if num_updates % delay:
+        return one_by_one(state)
+    if delay == 1:
+        return grouped(state)
+    return jax.lax.cond(updates_done % delay == 0, grouped, one_by_one, state)
+
+
+def td3_metrics(outs: tuple[jax.Array, ...]) -> dict[str, jax.Array]:
+    """Scalar metrics of stacked ``update_step`` outputs: mean critic loss, mean actor loss
+    over the updates that trained the actor, mean Q."""
+    c_loss, a_loss, q_mean, did_actor = outs[:4]
+    n_actor = jnp.sum(did_actor)
+    return {
+        "critic_loss": jnp.mean(c_loss),
+        "actor_loss": jnp.sum(jnp.where(did_actor, a_loss, 0.0)) / jnp.maximum(n_actor, 1),
+        "q_mean": jnp.mean(q_mean),
+    }
+
+
 def make_td3(
     config: TD3Config, obs_dim: int, action_dim: int, max_action: float | ArrayLike = 1.0
 ) -> TD3:
@@ -313,40 +524,18 @@ def make_td3(
     max_action = as_float_bound(max_action)
     if cfg.time_augmentation and obs_dim < 2:
         raise ValueError("time augmentation needs observations with a trailing time feature")
-    actor = DeterministicActor(cfg.actor_hidden, action_dim, max_action, cfg.init_scheme)
-    critic = CriticEnsemble(cfg.critic_hidden, cfg.num_critics, cfg.init_scheme)
-    first_critic = CriticEnsemble(cfg.critic_hidden, 1, cfg.init_scheme)
-    actor_opt = optax.adam(cfg.lr_actor)
-    critic_opt = make_optimizer(cfg.lr_critic, cfg.critic_grad_clip)
-    noise_scale = cfg.target_noise * max_action
-    noise_clip = cfg.noise_clip * max_action
-
-    def init(seed: int) -> TD3State:
-        key, k_actor, k_critic = jax.random.split(jax.random.PRNGKey(seed), 3)
-        obs = jnp.zeros((1, obs_dim), jnp.float32)
-        action = jnp.zeros((1, action_dim), jnp.float32)
-        actor_params = actor.init(k_actor, obs)
-        critic_params = critic.init(k_critic, obs, action)
-        return TD3State(
-            actor_params=actor_params,
-            critic_params=critic_params,
-            actor_target=actor_params,
-            critic_target=critic_params,
-            actor_opt_state=actor_opt.init(actor_params),
-            critic_opt_state=critic_opt.init(critic_params),
-            obs_mean=jnp.zeros(obs_dim, jnp.float32),
-            obs_std=jnp.ones(obs_dim, jnp.float32),
-            normalizer_set=jnp.array(False),
-            step=jnp.array(0, jnp.int32),
-            key=key,
-        )
-
-    def normalize(state: TD3State | Policy, obs: jax.Array) -> jax.Array:
-        return (obs - state.obs_mean) / state.obs_std
+    nets = _Networks(
+        actor=DeterministicActor(cfg.actor_hidden, action_dim, max_action, cfg.init_scheme),
+        critic=CriticEnsemble(cfg.critic_hidden, cfg.num_critics, cfg.init_scheme),
+        first_critic=CriticEnsemble(cfg.critic_hidden, 1, cfg.init_scheme),
+        actor_opt=optax.adam(cfg.lr_actor),
+        critic_opt=make_optimizer(cfg.lr_critic, cfg.critic_grad_clip),
+        max_action=max_action,
+    )
 
     @jax.jit
     def act(state: TD3State | Policy, obs: jax.Array, key: jax.Array | None = None) -> jax.Array:
-        action = actor.apply(state.actor_params, normalize(state, obs))
+        action = nets.actor.apply(state.actor_params, _normalize(state, obs))
         if key is None:
             return action
         noise = jax.random.normal(key, action.shape) * (cfg.exploration_noise * max_action)
@@ -354,91 +543,9 @@ def make_td3(
 
     @jax.jit
     def q_values(state: TD3State, obs: jax.Array, action: jax.Array) -> jax.Array:
-        return critic.apply(state.critic_params, normalize(state, obs), action)
+        return nets.critic.apply(state.critic_params, _normalize(state, obs), action)
 
-    def update_step(
-        state: TD3State, batch: ReplayData, key: jax.Array, train_actor: bool | None = None
-    ):
-        """One critic update and, every ``policy_delay``-th update, the actor's and the targets'.
-        ``train_actor``: None decides by ``state.step`` at run time (a ``cond``); True / False
-        fixes it."""
-        k_noise, k_time = jax.random.split(key)
-        critic_obs, next_obs, not_done = batch.obs, batch.next_obs, batch.not_done
-        if cfg.time_augmentation and cfg.time_augmentation_scheme == "next_only":
-            next_obs = redraw_next_time(k_time, next_obs, cfg.max_time)
-        elif cfg.time_augmentation:  # "finite_horizon"
-            critic_obs, next_obs, not_done = augment_time(
-                k_time, critic_obs, next_obs, cfg.max_time
-            )
-        obs_n = normalize(state, batch.obs)  # recorded time: the actor loss's input
-        critic_obs_n = normalize(state, critic_obs)
-        next_obs_n = normalize(state, next_obs)
-
-        # Critic: TD target from target networks, with target policy smoothing.
-        next_action = actor.apply(state.actor_target, next_obs_n)
-        if cfg.target_noise > 0:
-            noise = jax.random.normal(k_noise, next_action.shape) * noise_scale
-            noise = jnp.clip(noise, -noise_clip, noise_clip)
-            next_action = jnp.clip(next_action + noise, -max_action, max_action)
-        next_q = jnp.min(critic.apply(state.critic_target, next_obs_n, next_action), axis=0)
-        target = batch.reward + cfg.gamma * not_done * next_q
-        target = jax.lax.stop_gradient(target)
-
-        def critic_loss_fn(params: Params) -> tuple[jax.Array, jax.Array]:
-            q = critic.apply(params, critic_obs_n, batch.action)  # (num_critics, B)
-            loss = critic_loss(q - target, cfg.loss, cfg.pal_alpha, cfg.pal_min_priority)
-            return loss, jnp.mean(q)
-
-        (c_loss, q_mean), grads = jax.value_and_grad(critic_loss_fn, has_aux=True)(
-            state.critic_params
-        )
-        updates, critic_opt_state = critic_opt.update(
-            grads, state.critic_opt_state, state.critic_params
-        )
-        critic_params = optax.apply_updates(state.critic_params, updates)
-
-        # Delayed actor and target updates (Fujimoto: on update numbers delay, 2 * delay, ...).
-        def actor_step(_: None):
-            def actor_loss_fn(params: Params) -> jax.Array:
-                action = actor.apply(params, obs_n)
-                q1_params = jax.tree.map(lambda p: p[:1], critic_params)
-                return -jnp.mean(first_critic.apply(q1_params, obs_n, action))
-
-            a_loss, a_grads = jax.value_and_grad(actor_loss_fn)(state.actor_params)
-            a_updates, actor_opt_state = actor_opt.update(
-                a_grads, state.actor_opt_state, state.actor_params
-            )
-            actor_params = optax.apply_updates(state.actor_params, a_updates)
-            actor_target = optax.incremental_update(actor_params, state.actor_target, cfg.tau)
-            critic_target = optax.incremental_update(critic_params, state.critic_target, cfg.tau)
-            return actor_params, actor_opt_state, actor_target, critic_target, a_loss
-
-        def skip(_: None):
-            return (
-                state.actor_params,
-                state.actor_opt_state,
-                state.actor_target,
-                state.critic_target,
-                jnp.zeros((), jnp.float32),
-            )
-
-        if train_actor is None:
-            do_actor = (state.step + 1) % cfg.policy_delay == 0
-            outs = jax.lax.cond(do_actor, actor_step, skip, None)
-        else:
-            do_actor = jnp.array(train_actor)
-            outs = actor_step(None) if train_actor else skip(None)
-        actor_params, actor_opt_state, actor_target, critic_target, a_loss = outs
-        new_state = state.replace(
-            actor_params=actor_params,
-            critic_params=critic_params,
-            actor_target=actor_target,
-            critic_target=critic_target,
-            actor_opt_state=actor_opt_state,
-            critic_opt_state=critic_opt_state,
-            step=state.step + 1,
-        )
-        return new_state, (c_loss, a_loss, q_mean, do_actor)
+    update_step = functools.partial(_update_step, nets, cfg)
 
     def update(
         state: TD3State, data: ReplayData, size: jax.Array | int, num_updates: int
@@ -450,47 +557,27 @@ def make_td3(
         calls without recompiling; ``num_updates`` is static. Returns the new state and metrics:
         mean critic loss, mean actor loss (over the updates that trained the actor) and mean Q of
         the batches (all scalars)."""
-
-        # Whole groups of `delay` updates, the actor trained in the last: no run-time cond.
-        # They apply only when the update count is aligned with the delay (always with delay 1;
-        # with 2, when every episode is of even length); otherwise the per-update cond decides.
-        delay = cfg.policy_delay
-        group = [functools.partial(update_step, train_actor=False)] * (delay - 1)
-        group.append(functools.partial(update_step, train_actor=True))
-
-        def grouped(state: TD3State):
-            return scan_update_groups(
-                group, state, data, size, num_updates // delay, cfg.batch_size
-            )
-
-        def one_by_one(state: TD3State):
-            return scan_updates(update_step, state, data, size, num_updates, cfg.batch_size)
-
-        if num_updates % delay:
-            state, outs = one_by_one(state)
-        elif delay == 1:
-            state, outs = grouped(state)
-        else:
-            state, outs = jax.lax.cond(state.step % delay == 0, grouped, one_by_one, state)
-        c_loss, a_loss, q_mean, did_actor = outs
-        n_actor = jnp.sum(did_actor)
-        metrics = {
-            "critic_loss": jnp.mean(c_loss),
-            "actor_loss": jnp.sum(jnp.where(did_actor, a_loss, 0.0)) / jnp.maximum(n_actor, 1),
-            "q_mean": jnp.mean(q_mean),
-        }
-        return state, metrics
-
-    update_jit = jax.jit(update, static_argnames="num_updates")
+        state, outs = delayed_updates(
+            update_step,
+            cfg.policy_delay,
+            state.step,
+            state,
+            data,
+            size,
+            num_updates,
+            cfg.batch_size,
+        )
+        return state, td3_metrics(outs)
 
     return TD3(
         config=cfg,
         obs_dim=obs_dim,
         action_dim=action_dim,
         max_action=max_action,
-        init=init,
+        init=functools.partial(_init_state, nets, obs_dim, action_dim),
         act=act,
-        update=update_jit,
+        update=jax.jit(update, static_argnames="num_updates"),
+        update_step=update_step,
         set_normalizer=make_normalizer_setter(obs_dim, cfg.time_augmentation),
         q_values=q_values,
     )

@@ -1,4 +1,6 @@
-"""Episode rewards: from one learner episode's observations (T + 1, obs_dim) to rewards (T,)."""
+"""Imitation rewards. Episode rewards (OOPS, PWIL) map one learner episode's observations
+(T + 1, obs_dim) to rewards (T,); learned rewards (the discriminator) are pure-JAX functions of
+(s, s') with their own state, updated and queried inside the agent's update."""
 
 from ilfo.rewards.base import (
     EpisodeReward,
@@ -7,17 +9,31 @@ from ilfo.rewards.base import (
     Standardizer,
     make_atoms,
 )
+from ilfo.rewards.discriminator import Discriminator, DiscriminatorConfig, DiscriminatorState
+from ilfo.rewards.learned import (
+    LearnedReward,
+    Transitions,
+    expert_transitions,
+    sample_transitions,
+)
 from ilfo.rewards.oops import OOPS, OOPSConfig
 from ilfo.rewards.pwil import PWIL, PWILConfig
 
 __all__ = [
     "OOPS",
     "PWIL",
+    "Discriminator",
+    "DiscriminatorConfig",
+    "DiscriminatorState",
     "EpisodeReward",
+    "LearnedReward",
     "OOPSConfig",
     "PWILConfig",
     "RewardOutput",
     "RewardState",
     "Standardizer",
+    "Transitions",
+    "expert_transitions",
     "make_atoms",
+    "sample_transitions",
 ]

@@ -9,18 +9,20 @@ from __future__ import annotations
 import math
 import time
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 from typing import NamedTuple
 
 import gymnasium as gym
+import jax.numpy as jnp
 import numpy as np
 
 from ilfo import demos as demo_io
 from ilfo.agents import AgentFunctions
-from ilfo.algos import AGENT_PARTS, REWARD_PARTS
+from ilfo.algos import AGENT_PARTS, REWARD_PARTS, LearnedRewardPart, RewardPart
 from ilfo.envs import make_env
 from ilfo.paths import DATA_DIR
-from ilfo.rewards import OOPS, EpisodeReward
+from ilfo.rewards import OOPS, EpisodeReward, Transitions, expert_transitions
 from ilfo.training.config import TrainConfig
 
 
@@ -124,26 +126,43 @@ def load_demos(config: TrainConfig) -> list[demo_io.Episode]:
     return data.episodes[: config.num_demos]
 
 
-def make_agent(config: TrainConfig, env: EnvInfo) -> Agent:
+def make_agent(config: TrainConfig, env: EnvInfo, demos: Sequence[np.ndarray] | None) -> Agent:
     """Build the agent of ``config.algo`` (its config: ``config.agent_config(env.horizon)``).
 
     Fixed-horizon runs append the time feature remaining_steps / horizon to observations.
+    Algos with a learned reward get the agent trained on it (``ilfo.training.learned``), which
+    learns from ``demos`` (each (T_i + 1, obs_dim)); ``demos=None`` builds it only as a template
+    to read a saved state into (its reward's input statistics are then placeholders).
     """
     time_feature = config.uses_fixed_horizon
-    part = AGENT_PARTS[config.recipe.agent]
-    functions = part.make(
-        config.agent_config(env.horizon),
-        env.obs_dim + int(time_feature),
-        env.action_dim,
-        env.max_action,
-    )
+    algo = config.recipe
+    part = AGENT_PARTS[algo.agent]
+    dims = (env.obs_dim + int(time_feature), env.action_dim, env.max_action)
+    agent_config = config.agent_config(env.horizon)
+    if not algo.learned:
+        return Agent(part.make(agent_config, *dims), time_feature)
+    reward_part = REWARD_PARTS[algo.reward]
+    assert isinstance(reward_part, LearnedRewardPart) and part.make_learning is not None
+    reward_config = config.part_config(algo.reward)
+    reward = reward_part.make(reward_config)
+    if demos is None:
+        expert = Transitions(*[jnp.zeros((1, env.obs_dim), jnp.float32)] * 2)
+    else:
+        expert = expert_transitions(demos, min_count=reward.batch_size)
+    schedule = reward_part.schedule(reward_config)
+    functions = part.make_learning(agent_config, *dims, reward, expert, schedule, time_feature)
     return Agent(functions, time_feature)
 
 
 def make_reward(config: TrainConfig, demos: list[np.ndarray]) -> EpisodeReward | None:
-    """The episode reward of ``config.algo``; None for the task reward."""
-    name = config.recipe.reward
-    return None if name is None else REWARD_PARTS[name].make(demos, config.part_config(name))
+    """The episode reward of ``config.algo``; None for the task reward and for learned rewards
+    (the agent holds those: ``make_agent``)."""
+    algo = config.recipe
+    if algo.reward is None or algo.learned:
+        return None
+    part = REWARD_PARTS[algo.reward]
+    assert isinstance(part, RewardPart)
+    return part.make(demos, config.part_config(algo.reward))
 
 
 def network_normalizer(

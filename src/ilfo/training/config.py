@@ -13,7 +13,7 @@ from typing import Any, Literal
 from ilfo.agents import SACConfig, TD3Config
 from ilfo.algos import AGENT_PARTS, ALGOS, PART_CONFIGS, Recipe, algos_using, recipe
 from ilfo.config import dataclass_from_dict
-from ilfo.rewards import OOPSConfig, PWILConfig
+from ilfo.rewards import DiscriminatorConfig, OOPSConfig, PWILConfig
 
 Algo = Literal[tuple(ALGOS)]  # type: ignore[valid-type]
 """The names of ``ilfo.algos.ALGOS``, made from the registry (the CLI's ``--algo`` choices)."""
@@ -86,6 +86,9 @@ class TrainConfig:
     config stay seed sweeps)."""
     pwil: PWILConfig | None = None
     """PWIL rewarder (algo pwil-td3); None: the paper's defaults (``PWILConfig()``)."""
+    discriminator: DiscriminatorConfig | None = None
+    """The (s, s') discriminator whose reward gaifo-td3 learns from; None: the OPOLO authors'
+    settings (``DiscriminatorConfig()``)."""
 
     def __post_init__(self) -> None:
         algo = recipe(self.algo)
@@ -157,9 +160,12 @@ class TrainConfig:
 
     def part_config(self, part: str) -> Any:
         """The config of part ``part`` (a field name: ``td3``, ``oops``, ...) as given, else its
-        default (the ``preset``'s for an agent); a ``seed`` field is always this run's seed, so
-        that one seed sets a whole run (seed sweeps with a custom config stay seed sweeps)."""
+        default (the recipe's ``agent_default``, else the ``preset``'s, for an agent); a
+        ``seed`` field is always this run's seed, so that one seed sets a whole run (seed
+        sweeps with a custom config stay seed sweeps)."""
         given = getattr(self, part)
+        if given is None and part == self.recipe.agent and self.recipe.agent_default:
+            given = self.recipe.agent_default()
         if given is None:
             given = AGENT_PARTS[part].default(self.preset) if part in AGENT_PARTS else None
             given = PART_CONFIGS[part]() if given is None else given

@@ -55,6 +55,14 @@ from ilfo.training.run_dir import (
 )
 
 _NOTHING = contextlib.nullcontext()
+_LOGGED_UPDATE_METRICS = {
+    "critic_loss",
+    "actor_loss",
+    "reward_mean",
+    "reward_loss",
+    "reward_accuracy",
+}
+"""The update metrics that episode rows log (``metrics.METRIC_FIELDS``)."""
 
 
 class LoopHooks:
@@ -102,7 +110,7 @@ class Trainer:
         self.demos, self.demo_return = demos.observations, demos.mean_return
         self.distance_probe = demos.distance_probe
         self.rewarder = make_reward(config, self.demos)
-        self.agent = make_agent(config, env)
+        self.agent = make_agent(config, env, self.demos)
         self.state = self.agent.functions.init(config.seed)
         self.buffer = ReplayBuffer(
             config.replay_capacity, env.obs_dim + int(self.agent.time_feature), env.action_dim
@@ -221,6 +229,11 @@ class Trainer:
                 output = self.rewarder(observations)
             self.hooks.episode_rewarded(self, output)
             rewards = output.rewards
+        elif self.config.recipe.learned:
+            # The agent's update rewards its batches with the reward's parameters of the time;
+            # these (today's, stored but not learned from) are the episode's proxy return.
+            funcs = self.agent.functions
+            rewards = np.asarray(funcs.rewards(self.state, observations[:-1], observations[1:]))
         else:
             rewards = np.asarray(task_rewards)
             if cfg.uses_fixed_horizon:
@@ -244,8 +257,7 @@ class Trainer:
         if not random_phase:
             with self.hooks.timed("update"):
                 self.state, metrics = self._update(num_steps * cfg.updates_per_step)
-            row["critic_loss"] = round(metrics["critic_loss"], 5)
-            row["actor_loss"] = round(metrics["actor_loss"], 5)
+            row.update({name: round(value, 5) for name, value in metrics.items()})
         if self.step // cfg.eval_every > (self.step - num_steps) // cfg.eval_every:
             with self.hooks.timed("evaluate"):
                 self.last_eval = self.evaluate()
@@ -289,20 +301,22 @@ class Trainer:
         ``update`` compiles once per number of updates; episodes of every length would each
         compile anew, whereas powers of two compile at most log2(horizon * updates_per_step) + 1
         times. Every update draws its keys from the state, so chunks give exactly the updates
-        one call would.
+        one call would. Metrics are averaged over the chunks that report them (a learned
+        reward reports its own only from chunks in which it took steps).
         """
-        state, totals = self.state, {"critic_loss": 0.0, "actor_loss": 0.0}
+        state, totals, weights = self.state, {}, {}
         remaining, chunk = num_updates, 1 << (num_updates.bit_length() - 1)
         while remaining:
             if chunk <= remaining:
                 state, metrics = self.agent.functions.update(
                     state, self.buffer.data, self.buffer.size, num_updates=chunk
                 )
-                for name in totals:
-                    totals[name] += float(metrics[name]) * chunk
+                for name in _LOGGED_UPDATE_METRICS.intersection(metrics):
+                    totals[name] = totals.get(name, 0.0) + float(metrics[name]) * chunk
+                    weights[name] = weights.get(name, 0) + chunk
                 remaining -= chunk
             chunk >>= 1
-        return state, {name: total / num_updates for name, total in totals.items()}
+        return state, {name: totals[name] / weights[name] for name in totals}
 
     def _fit_normalizer(self) -> None:
         """Fix the networks' normaliser once, when the policy takes over: see

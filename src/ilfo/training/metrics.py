@@ -23,6 +23,9 @@ METRIC_FIELDS = [
     "eval_score_norm",
     "eval_return_norm",
     "eval_ot_distance",
+    "reward_mean",
+    "reward_loss",
+    "reward_accuracy",
 ]
 
 

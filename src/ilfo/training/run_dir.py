@@ -212,7 +212,7 @@ def load_run_policy(run_dir: str | Path, which: str = "final") -> RunPolicy:
     run_dir = Path(run_dir)
     config = config_from_dict(read_run_config(run_dir), run_dir / CONFIG_FILE)
     env = env_info(_probe_env(config), config.env)
-    agent = make_agent(config, env)
+    agent = make_agent(config, env, demos=None)  # a template: its state is read from files
     template = agent.functions.init(config.seed)
     file = {"final": FINAL_POLICY_FILE, "best": BEST_POLICY_FILE}.get(which)
     if which == "best" and not (run_dir / BEST_POLICY_FILE).is_file():

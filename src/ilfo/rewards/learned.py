@@ -1,0 +1,85 @@
+"""Rewards that learn during training: the ``LearnedReward`` protocol and the expert data they see.
+
+An episode reward (``EpisodeReward``: OOPS, PWIL) is computed once per learner episode, in numpy,
+and written into the replay buffer. A learned reward (a discriminator, a reward network) changes
+while the agent learns, so rewards frozen in the buffer would go stale: instead the agent's
+jitted update asks it for the rewards of each sampled batch, with its current parameters
+(``ilfo.training.learned`` composes the two). Everything here is pure JAX: the reward's state
+is a pytree (parameters, optimiser state, statistics) that is checkpointed with the agent's.
+
+Observations given to a learned reward are the environment's (no time feature).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, NamedTuple, Protocol
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+
+class Transitions(NamedTuple):
+    """A batch of state transitions (s, s'): what a state-only reward sees of either side."""
+
+    obs: jax.Array
+    """(B, obs_dim) s_t."""
+    next_obs: jax.Array
+    """(B, obs_dim) s_t+1."""
+
+
+def expert_transitions(demos: Sequence[np.ndarray], min_count: int = 1) -> Transitions:
+    """All transitions (s_t, s_t+1) of the demos (each (T_i + 1, obs_dim)), pooled.
+
+    Raises a ValueError where they hold fewer than ``min_count`` transitions (a batch size), or
+    a demo has fewer than two observations (no transition).
+    """
+    if not demos:
+        raise ValueError("a learned reward needs at least one demonstration")
+    for i, demo in enumerate(demos):
+        if np.ndim(demo) != 2 or len(demo) < 2:
+            raise ValueError(
+                f"demo {i} has shape {np.shape(demo)}: a learned reward needs (s, s') "
+                "transitions, i.e. at least two observations of shape (T + 1, obs_dim)"
+            )
+    obs = np.concatenate([np.asarray(d[:-1], np.float32) for d in demos])
+    next_obs = np.concatenate([np.asarray(d[1:], np.float32) for d in demos])
+    if len(obs) < min_count:
+        raise ValueError(
+            f"the demos hold {len(obs)} transitions, fewer than a batch of {min_count}: pass "
+            "more demos (--num-demos) or a smaller batch size"
+        )
+    return Transitions(jnp.asarray(obs), jnp.asarray(next_obs))
+
+
+def sample_transitions(data: Transitions, key: jax.Array, batch_size: int) -> Transitions:
+    """``batch_size`` transitions of ``data`` drawn uniformly with replacement (jittable)."""
+    idx = jax.random.randint(key, (batch_size,), 0, data.obs.shape[0])
+    return Transitions(data.obs[idx], data.next_obs[idx])
+
+
+class LearnedReward(Protocol):
+    """A reward r(s, s') learned from expert and learner transitions, in pure JAX.
+
+    ``init``, ``update`` and ``reward`` are pure functions of their arguments (jittable; the
+    config is closed over), so the reward can be updated and queried inside the agent's
+    jitted update."""
+
+    batch_size: int
+    """Expert and learner transitions per ``update``."""
+
+    def init(self, key: jax.Array, expert: Transitions) -> Any:
+        """Fresh state (a pytree); may read the expert transitions (e.g. input statistics)."""
+        ...
+
+    def update(
+        self, state: Any, learner: Transitions, expert: Transitions, key: jax.Array
+    ) -> tuple[Any, dict[str, jax.Array]]:
+        """One gradient step on a batch of each; returns the new state and scalar metrics
+        (``reward_loss``, and any others)."""
+        ...
+
+    def reward(self, state: Any, obs: jax.Array, next_obs: jax.Array) -> jax.Array:
+        """Rewards (B,) of transitions obs, next_obs (B, obs_dim) under ``state``."""
+        ...

@@ -1,0 +1,201 @@
+"""An off-policy agent trained on a learned reward: TD3 whose batches are rewarded by a
+``LearnedReward`` (a discriminator) with its current parameters, the reward trained beside it.
+
+``with_learned_reward`` composes the two into one agent with the loop's ``AgentFunctions``
+interface, so the training loop, checkpoints, resume and evaluation treat it as any agent: its
+state (``LearnedRewardState``) holds the agent's state and the reward's, and its ``update``
+first takes the reward's gradient steps that fall due (``RewardSchedule``), then the agent's
+updates, each on a replay batch whose stored rewards are replaced by the reward's, computed
+inside the jitted update (no relabelling of the buffer; nothing stale).
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import flax
+import jax
+import jax.numpy as jnp
+from numpy.typing import ArrayLike
+
+from ilfo.agents.td3 import TD3, delayed_updates, td3_metrics
+from ilfo.replay import ReplayData, sample_batch
+from ilfo.rewards.learned import LearnedReward, Transitions, sample_transitions
+
+
+class RewardSchedule(NamedTuple):
+    """When the reward learns: ``steps`` gradient steps each time the agent's update count
+    crosses a multiple of ``every`` (taken before the agent's updates of that call)."""
+
+    every: int
+    steps: int
+
+    def steps_due(self, updates_done: int, num_updates: int) -> int:
+        """Reward steps due before agent updates updates_done + 1 ... + num_updates."""
+        crossed = (updates_done + num_updates) // self.every - updates_done // self.every
+        return self.steps * crossed
+
+
+@flax.struct.dataclass
+class LearnedRewardState:
+    """The composed agent's state (a pytree): the agent's, the reward's, and a key for drawing
+    batches. Reads like an agent state where the loop needs one (the policy, the normaliser)."""
+
+    agent: Any
+    reward: Any
+    updates: jax.Array
+    """() int32, agent updates done (what the reward's schedule counts)."""
+    key: jax.Array
+
+    @property
+    def actor_params(self) -> Any:
+        return self.agent.actor_params
+
+    @property
+    def obs_mean(self) -> jax.Array:
+        return self.agent.obs_mean
+
+    @property
+    def obs_std(self) -> jax.Array:
+        return self.agent.obs_std
+
+    @property
+    def normalizer_set(self) -> jax.Array:
+        return self.agent.normalizer_set
+
+
+class LearnedRewardAgent(NamedTuple):
+    """``AgentFunctions`` of an agent with a learned reward, plus the reward of transitions."""
+
+    obs_dim: int
+    action_dim: int
+    max_action: float
+    init: Callable[[int], LearnedRewardState]
+    act: Callable[..., jax.Array]
+    update: Callable[..., tuple[LearnedRewardState, dict[str, jax.Array]]]
+    """update(state, data, size, num_updates) -> (state, metrics): the reward's steps that
+    are due, then ``num_updates`` agent updates (metrics of both)."""
+    set_normalizer: Callable[[LearnedRewardState, ArrayLike, ArrayLike], LearnedRewardState]
+    q_values: Callable[[LearnedRewardState, jax.Array, jax.Array], jax.Array]
+    rewards: Callable[[LearnedRewardState, jax.Array, jax.Array], jax.Array]
+    """rewards(state, obs, next_obs) -> (B,): the reward's current values of environment
+    transitions (no time feature), for logging an episode's proxy return."""
+
+
+def env_observations(obs: jax.Array, time_feature: bool) -> jax.Array:
+    """The environment's part of agent observations: the time feature, where the run appends
+    one, dropped (a reward of states must not see the clock)."""
+    return obs[..., :-1] if time_feature else obs
+
+
+def reward_steps(
+    reward: LearnedReward,
+    time_feature: bool,
+    state: LearnedRewardState,
+    data: ReplayData,
+    size: jax.Array | int,
+    expert: Transitions,
+    num_steps: int,
+) -> tuple[LearnedRewardState, dict[str, jax.Array]]:
+    """``num_steps`` gradient steps of the reward, each on uniform draws of ``reward.batch_size``
+    replay transitions and as many expert ones; metrics averaged over the steps."""
+
+    def body(reward_state: Any, key: jax.Array):
+        k_learner, k_expert, k_step = jax.random.split(key, 3)
+        batch = sample_batch(data, size, k_learner, reward.batch_size)
+        learner = Transitions(
+            env_observations(batch.obs, time_feature),
+            env_observations(batch.next_obs, time_feature),
+        )
+        expert_batch = sample_transitions(expert, k_expert, reward.batch_size)
+        return reward.update(reward_state, learner, expert_batch, k_step)
+
+    key, k_steps = jax.random.split(state.key)
+    reward_state, metrics = jax.lax.scan(body, state.reward, jax.random.split(k_steps, num_steps))
+    state = state.replace(reward=reward_state, key=key)
+    return state, jax.tree.map(jnp.mean, metrics)
+
+
+def with_learned_reward(
+    agent: TD3,
+    reward: LearnedReward,
+    expert: Transitions,
+    schedule: RewardSchedule,
+    time_feature: bool,
+) -> LearnedRewardAgent:
+    """TD3 trained on ``reward``, learned from ``expert`` transitions and the replay buffer's.
+
+    Args:
+        agent: the TD3 agent (``make_td3``); its updates run as ``agent.update`` would, on
+            batches rewarded by ``reward``.
+        reward: the learned reward (e.g. ``Discriminator``).
+        expert: the expert transitions (``expert_transitions``), environment observations.
+        schedule: when the reward takes its gradient steps.
+        time_feature: whether the agent's observations end with the time feature (dropped
+            before the reward sees them).
+    """
+    cfg = agent.config
+
+    def init(seed: int) -> LearnedRewardState:
+        key, k_reward = jax.random.split(jax.random.fold_in(jax.random.PRNGKey(seed), 1))
+        return LearnedRewardState(
+            agent=agent.init(seed),
+            reward=reward.init(k_reward, expert),
+            updates=jnp.array(0, jnp.int32),
+            key=key,
+        )
+
+    def batch_rewards(state: LearnedRewardState, obs: jax.Array, next_obs: jax.Array):
+        obs, next_obs = (env_observations(x, time_feature) for x in (obs, next_obs))
+        return reward.reward(state.reward, obs, next_obs)
+
+    def update_step(state: LearnedRewardState, batch: ReplayData, key: jax.Array, train_actor=None):
+        rewards = batch_rewards(state, batch.obs, batch.next_obs)
+        agent_state, out = agent.update_step(
+            state.agent, batch._replace(reward=rewards), key, train_actor
+        )
+        state = state.replace(agent=agent_state, updates=state.updates + 1)
+        return state, (*out, jnp.mean(rewards))
+
+    def agent_updates(state: LearnedRewardState, data: ReplayData, size, num_updates: int):
+        state, outs = delayed_updates(
+            update_step,
+            cfg.policy_delay,
+            state.agent.step,
+            state,
+            data,
+            size,
+            num_updates,
+            cfg.batch_size,
+        )
+        return state, {**td3_metrics(outs), "reward_mean": jnp.mean(outs[4])}
+
+    agent_updates_jit = jax.jit(agent_updates, static_argnames="num_updates")
+    reward_steps_jit = jax.jit(
+        functools.partial(reward_steps, reward, time_feature), static_argnames="num_steps"
+    )
+
+    def update(state: LearnedRewardState, data: ReplayData, size, num_updates: int):
+        metrics: dict[str, jax.Array] = {}
+        due = schedule.steps_due(int(state.updates), num_updates)
+        if due:
+            state, metrics = reward_steps_jit(state, data, size, expert, num_steps=due)
+        state, agent_metrics = agent_updates_jit(state, data, size, num_updates=num_updates)
+        return state, {**agent_metrics, **metrics}
+
+    def set_normalizer(state: LearnedRewardState, mean: ArrayLike, std: ArrayLike):
+        return state.replace(agent=agent.set_normalizer(state.agent, mean, std))
+
+    return LearnedRewardAgent(
+        obs_dim=agent.obs_dim,
+        action_dim=agent.action_dim,
+        max_action=agent.max_action,
+        init=init,
+        act=agent.act,
+        update=update,
+        set_normalizer=set_normalizer,
+        q_values=lambda state, obs, action: agent.q_values(state.agent, obs, action),
+        rewards=jax.jit(lambda state, obs, next_obs: reward.reward(state.reward, obs, next_obs)),
+    )

@@ -1,0 +1,129 @@
+"""Agents trained on a learned reward (ilfo.training.learned) and the gaifo-td3 algo end to end."""
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from test_train import TINY, _metrics, _train
+
+from ilfo.agents import TD3Config, make_td3
+from ilfo.cli import main
+from ilfo.replay import ReplayData
+from ilfo.rewards import Discriminator, DiscriminatorConfig, expert_transitions
+from ilfo.training import Trainer
+from ilfo.training.learned import RewardSchedule, with_learned_reward
+
+SMALL_DISC = {"update_every": 50, "updates": 2, "batch_size": 32, "hidden": (32, 32)}
+
+
+def test_reward_schedule_counts_the_multiples_crossed():
+    schedule = RewardSchedule(every=500, steps=10)
+    assert schedule.steps_due(0, 499) == 0
+    assert schedule.steps_due(0, 500) == 10
+    assert schedule.steps_due(499, 1) == 10
+    assert schedule.steps_due(500, 499) == 0
+    assert schedule.steps_due(100, 2000) == 40
+    # Chunks of any sizes take the steps of one call: 1000 updates as 512 + 256 + ... + 8.
+    done, total = 0, 0
+    for chunk in (512, 256, 128, 64, 32, 8):
+        total += schedule.steps_due(done, chunk)
+        done += chunk
+    assert total == schedule.steps_due(0, 1000) == 20
+
+
+def _composed(time_feature=False):
+    rng = np.random.default_rng(0)
+    obs_dim = 4 + int(time_feature)
+    demo = rng.normal(size=(60, 4)).astype(np.float32)
+    expert = expert_transitions([demo], min_count=32)
+    agent = make_td3(TD3Config(actor_hidden=(16,), critic_hidden=(16,), batch_size=32), obs_dim, 2)
+    reward = Discriminator(DiscriminatorConfig(**SMALL_DISC))
+    composed = with_learned_reward(agent, reward, expert, RewardSchedule(50, 2), time_feature)
+    n = 200
+    data = ReplayData(
+        jnp.asarray(rng.normal(size=(n, obs_dim)), jnp.float32),
+        jnp.asarray(rng.uniform(-1, 1, (n, 2)), jnp.float32),
+        jnp.zeros(n, jnp.float32),
+        jnp.asarray(rng.normal(size=(n, obs_dim)), jnp.float32),
+        jnp.ones(n, jnp.float32),
+    )
+    return composed, data
+
+
+def _leaves(tree):
+    return [np.asarray(x) for x in jax.tree.leaves(tree)]
+
+
+def test_updates_use_the_learned_reward_not_the_stored_one():
+    composed, data = _composed()
+    state = composed.init(0)
+    a, metrics = composed.update(state, data, 200, num_updates=60)
+    garbage = data._replace(reward=jnp.full_like(data.reward, 1e6))
+    b, _ = composed.update(state, garbage, 200, num_updates=60)
+    for x, y in zip(_leaves(a), _leaves(b), strict=True):
+        np.testing.assert_array_equal(x, y)
+    assert "reward_loss" in metrics  # 60 updates cross 50: the reward took its steps
+    assert int(a.updates) == 60 and int(a.agent.step) == 60
+    # The reward learned, and the agent's batches are rewarded by its current parameters.
+    before = composed.rewards(state, data.obs, data.next_obs)
+    after = composed.rewards(a, data.obs, data.next_obs)
+    assert not np.allclose(before, after)
+
+
+def test_the_reward_never_sees_the_time_feature():
+    composed, data = _composed(time_feature=True)
+    state = composed.init(0)
+    shifted = data._replace(
+        obs=data.obs.at[:, -1].set(0.3), next_obs=data.next_obs.at[:, -1].set(0.9)
+    )
+    _, m1 = composed.update(state, data, 200, num_updates=50)
+    _, m2 = composed.update(state, shifted, 200, num_updates=50)
+    assert float(m1["reward_loss"]) == float(m2["reward_loss"])
+
+
+GAIFO = dict(algo="gaifo-td3", discriminator=SMALL_DISC, td3={"actor_hidden": (32, 32),
+             "critic_hidden": (32, 32)})  # fmt: skip
+
+
+def test_gaifo_td3_trains_deterministically_and_resume_equals_uninterrupted(tmp_path):
+    full = _metrics(_train(tmp_path, "full", **GAIFO))
+    assert full == _metrics(_train(tmp_path, "again", **GAIFO))
+    learned_rows = [r for r in full if r["reward_loss"]]
+    assert learned_rows and all(0.0 <= float(r["reward_accuracy"]) <= 1.0 for r in learned_rows)
+    assert all(float(r["proxy_return"]) > 0 for r in full)  # -log(1 - D) > 0
+    run = _train(tmp_path, "resumed", **{**GAIFO, "steps": 300})
+    trainer = Trainer.resume(run, progress=False, steps=600)
+    assert trainer.step == 300
+    assert _metrics(trainer.train()) == full
+
+
+def test_gaifo_td3_defaults_to_the_authors_td3_and_flags_reach_config_json(tmp_path, capsys):
+    args = ["train", "--algo", "gaifo-td3", "--env", "Hopper-v5", "--demos", TINY["demos"]]
+    args += ["--horizon", "50", "--steps", "100", "--start-steps", "100", "--eval-every", "100"]
+    args += ["--eval-episodes", "1", "--out", str(tmp_path), "--no-progress"]
+    args += ["--discriminator-lr", "0.001", "--discriminator-batch-size", "16"]
+    assert main(args) == 0
+    (run,) = tmp_path.iterdir()
+    config = json.loads((run / "config.json").read_text())
+    assert config["discriminator"]["lr"] == 0.001
+    assert config["discriminator"]["batch_size"] == 16
+    assert config["td3"]["actor_hidden"] == [400, 300]  # the DACfO authors', not the preset's
+    assert config["td3"]["init_scheme"] == "glorot"
+    assert config["oops"] is None
+
+
+def test_too_few_demo_transitions_for_a_batch_is_a_clear_error(tmp_path):
+    from ilfo.training import TrainConfig
+
+    config = TrainConfig(**{**TINY, **GAIFO, "discriminator": {"batch_size": 100_000}})
+    with pytest.raises(ValueError, match="fewer than a batch of 100000"):
+        Trainer(config, tmp_path / "run", progress=False)
+
+
+def test_discriminator_flags_do_not_apply_to_oops():
+    from ilfo.training import TrainConfig
+
+    with pytest.raises(ValueError, match="discriminator settings"):
+        TrainConfig(algo="oops-td3", discriminator={"lr": 1e-3})
