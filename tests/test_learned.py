@@ -6,14 +6,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from test_train import TINY, _metrics, _train
 
 from ilfo.agents import TD3Config, make_td3
 from ilfo.cli import main
 from ilfo.replay import ReplayData
 from ilfo.rewards import Discriminator, DiscriminatorConfig, expert_transitions
 from ilfo.training import Trainer
-from ilfo.training.learned import RewardSchedule, with_learned_reward
+from ilfo.training.learned import LearnedRewardSetup, RewardSchedule, with_learned_reward
+from test_train import TINY, _metrics, _train
 
 SMALL_DISC = {"update_every": 50, "updates": 2, "batch_size": 32, "hidden": (32, 32)}
 
@@ -40,7 +40,8 @@ def _composed(time_feature=False):
     expert = expert_transitions([demo], min_count=32)
     agent = make_td3(TD3Config(actor_hidden=(16,), critic_hidden=(16,), batch_size=32), obs_dim, 2)
     reward = Discriminator(DiscriminatorConfig(**SMALL_DISC))
-    composed = with_learned_reward(agent, reward, expert, RewardSchedule(50, 2), time_feature)
+    setup = LearnedRewardSetup(reward, RewardSchedule(50, 2), expert, expert.obs, time_feature)
+    composed = with_learned_reward(agent, setup)
     n = 200
     data = ReplayData(
         jnp.asarray(rng.normal(size=(n, obs_dim)), jnp.float32),

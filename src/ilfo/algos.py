@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from ilfo.agents import SACConfig, TD3Config, ddpg_config, make_sac, make_td3
+from ilfo.agents.opolo import OPOLOConfig, make_opolo
 from ilfo.rewards import (
     OOPS,
     PWIL,
@@ -54,18 +55,18 @@ class Part:
 class AgentPart(Part):
     """An RL agent the loop can train (TD3, SAC)."""
 
-    make: Callable[..., Any]
+    make: Callable[..., Any] | None
     """``make(config, obs_dim, action_dim, max_action)`` -> the agent's functions
-    (``ilfo.agents.AgentFunctions``)."""
+    (``ilfo.agents.AgentFunctions``); None for an agent that needs a learned reward."""
     default: Callable[[str], Any]
     """``default(preset)`` -> the config used when none is given (``TrainConfig.preset``)."""
     for_run: Callable[[Any, int, bool], Any]
     """``for_run(config, horizon, fixed_horizon)`` -> the config as a run uses it (what the
     trainer sets: see ``set_by_trainer``)."""
     make_learning: Callable[..., Any] | None = None
-    """``make_learning(config, obs_dim, action_dim, max_action, reward, expert, schedule,
-    time_feature)`` -> the agent's functions trained on a ``LearnedReward`` (see
-    ``ilfo.training.learned``); None: the agent cannot use one."""
+    """``make_learning(config, obs_dim, action_dim, max_action, setup)`` -> the agent's functions
+    trained on a learned reward (``setup``: ``ilfo.training.learned.LearnedRewardSetup``);
+    None: the agent cannot use one."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -100,9 +101,10 @@ class Recipe:
     """One line for ``--help`` and the docs."""
     adapt_agent: Callable[[Any], Any] | None = None
     """A change applied to the agent's config after the run's (e.g. ``ddpg_config``)."""
-    agent_default: Callable[[], Any] | None = None
-    """The agent's config where none is given, instead of the agent part's preset default
-    (a baseline's authors' settings); flags change single settings of it."""
+    part_defaults: Callable[[str], dict[str, Any]] | None = None
+    """``part_defaults(env_id)`` -> {part name: config}: the recipe's own defaults for its
+    parts, where a run gives none (a baseline's authors' settings, which may differ by env),
+    in place of the parts' own (the agent's ``--preset``); flags change single settings."""
 
     @property
     def imitation(self) -> bool:
@@ -127,26 +129,35 @@ def _td3_for_run(config: TD3Config, horizon: int, fixed_horizon: bool) -> TD3Con
     )
 
 
-def _td3_learning(config: TD3Config, obs_dim, action_dim, max_action, reward, expert, schedule,
-                  time_feature):  # fmt: skip
+def _td3_learning(config: TD3Config, obs_dim: int, action_dim: int, max_action: float, setup):
     from ilfo.training.learned import with_learned_reward
 
-    agent = make_td3(config, obs_dim, action_dim, max_action)
-    return with_learned_reward(agent, reward, expert, schedule, time_feature)
+    return with_learned_reward(make_td3(config, obs_dim, action_dim, max_action), setup)
 
 
-def _dacfo_td3() -> TD3Config:
-    """The TD3 of the DACfO authors' code (opolo-code ``td3dacfo.py``, ``td3dacfo.yml``):
-    400-300 ReLU networks (Glorot initialisation), batch 100, Adam 3e-4, tau 0.005, exploration
-    noise 0.1, target smoothing 0.2 clipped at 0.5, policy delay 2, MSE loss, no time
-    augmentation."""
-    return TD3Config(
+def _dacfo_defaults(env_id: str) -> dict[str, Any]:
+    """The DACfO authors' code (opolo-code ``td3dacfo.py``, ``td3dacfo.yml``): TD3 with 400-300
+    ReLU networks (Glorot initialisation), batch 100, Adam 3e-4 (1e-3 on Walker2d, for the
+    discriminator too, which uses the agent's rate), tau 0.005, exploration noise 0.1, target
+    smoothing 0.2 clipped at 0.5, policy delay 2, MSE loss, no time augmentation."""
+    lr = 1e-3 if env_id.startswith("Walker2d") else 3e-4
+    td3 = TD3Config(
         actor_hidden=(400, 300),
         critic_hidden=(400, 300),
         batch_size=100,
         exploration_noise=0.1,
         init_scheme="glorot",
+        lr_actor=lr,
+        lr_critic=lr,
     )
+    return {"td3": td3, "discriminator": DiscriminatorConfig(lr=lr)}
+
+
+def _opolo_defaults(env_id: str) -> dict[str, Any]:
+    """The OPOLO authors' settings (opolo.yml): ``OPOLOConfig()``, and on Hopper lr 1e-4,
+    alpha 0.01, pi_reg_coef 0.01; the discriminator learns at the agent's rate."""
+    opolo = OPOLOConfig.hopper() if env_id.startswith("Hopper") else OPOLOConfig()
+    return {"opolo": opolo, "discriminator": DiscriminatorConfig(lr=opolo.lr)}
 
 
 AGENT_PARTS: dict[str, AgentPart] = {
@@ -160,7 +171,8 @@ AGENT_PARTS: dict[str, AgentPart] = {
         description=(
             "Defaults: the --preset's (paper | fast, shown as 'paper X, fast Y' where they "
             "differ); a flag here changes that one setting of the preset. oops-ddpg then applies "
-            "DDPG's changes (one critic, no target smoothing, policy delay 1). Set by the "
+            "DDPG's changes (one critic, no target smoothing, policy delay 1); gaifo-td3 starts "
+            "from the DACfO authors' settings instead of the preset's. Set by the "
             "trainer: max_time (the episode horizon); time augmentation applies only where "
             "observations carry the time feature (fixed-horizon runs)."
         ),
@@ -173,6 +185,16 @@ AGENT_PARTS: dict[str, AgentPart] = {
         for_run=lambda config, horizon, fixed_horizon: config,
         title="SAC agent",
         description="Defaults: Haarnoja et al. 2018.",
+    ),
+    "opolo": AgentPart(
+        config=OPOLOConfig,
+        make=None,
+        make_learning=make_opolo,
+        default=lambda preset: OPOLOConfig(),
+        for_run=lambda config, horizon, fixed_horizon: config,
+        title="OPOLO agent",
+        description="Defaults: the authors' code (opolo.yml; Hopper: lr 1e-4, alpha 0.01, "
+        "pi-reg-coef 0.01).",
     ),
 }
 """The agents, by the name of their ``TrainConfig`` field."""
@@ -219,7 +241,14 @@ RECIPES: tuple[Recipe, ...] = (
         "td3",
         "discriminator",
         "GAIfO/DACfO: an (s, s') discriminator's reward + TD3 (the OPOLO authors' td3dacfo)",
-        agent_default=_dacfo_td3,
+        part_defaults=_dacfo_defaults,
+    ),
+    Recipe(
+        "opolo",
+        "opolo",
+        "discriminator",
+        "OPOLO: discriminator reward, DICE critic, inverse-dynamics regularised actor (Zhu 2020)",
+        part_defaults=_opolo_defaults,
     ),
     Recipe("td3", "td3", None, "TD3 on the task reward (no demos)"),
     Recipe("sac", "sac", None, "SAC on the task reward (no demos; ilfo's experts)"),

@@ -22,8 +22,9 @@ from ilfo.agents import AgentFunctions
 from ilfo.algos import AGENT_PARTS, REWARD_PARTS, LearnedRewardPart, RewardPart
 from ilfo.envs import make_env
 from ilfo.paths import DATA_DIR
-from ilfo.rewards import OOPS, EpisodeReward, Transitions, expert_transitions
+from ilfo.rewards import OOPS, EpisodeReward, expert_transitions
 from ilfo.training.config import TrainConfig
+from ilfo.training.learned import LearnedRewardSetup
 
 
 class Agent(NamedTuple):
@@ -132,7 +133,7 @@ def make_agent(config: TrainConfig, env: EnvInfo, demos: Sequence[np.ndarray] | 
     Fixed-horizon runs append the time feature remaining_steps / horizon to observations.
     Algos with a learned reward get the agent trained on it (``ilfo.training.learned``), which
     learns from ``demos`` (each (T_i + 1, obs_dim)); ``demos=None`` builds it only as a template
-    to read a saved state into (its reward's input statistics are then placeholders).
+    to read a saved state into (its reward's input statistics are then placeholders, zeros).
     """
     time_feature = config.uses_fixed_horizon
     algo = config.recipe
@@ -143,14 +144,22 @@ def make_agent(config: TrainConfig, env: EnvInfo, demos: Sequence[np.ndarray] | 
         return Agent(part.make(agent_config, *dims), time_feature)
     reward_part = REWARD_PARTS[algo.reward]
     assert isinstance(reward_part, LearnedRewardPart) and part.make_learning is not None
+    from ilfo.training.rollout import agent_observations  # rollout imports this module
+
     reward_config = config.part_config(algo.reward)
     reward = reward_part.make(reward_config)
     if demos is None:
-        expert = Transitions(*[jnp.zeros((1, env.obs_dim), jnp.float32)] * 2)
-    else:
-        expert = expert_transitions(demos, min_count=reward.batch_size)
-    schedule = reward_part.schedule(reward_config)
-    functions = part.make_learning(agent_config, *dims, reward, expert, schedule, time_feature)
+        demos = [np.zeros((2, env.obs_dim), np.float32)] * reward.batch_size
+    setup = LearnedRewardSetup(
+        reward=reward,
+        schedule=reward_part.schedule(reward_config),
+        expert=expert_transitions(demos, min_count=reward.batch_size),
+        expert_agent_obs=jnp.asarray(
+            np.concatenate([agent_observations(d, env.horizon, time_feature)[:-1] for d in demos])
+        ),
+        time_feature=time_feature,
+    )
+    functions = part.make_learning(agent_config, *dims, setup)
     return Agent(functions, time_feature)
 
 

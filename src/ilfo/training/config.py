@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from ilfo.agents import SACConfig, TD3Config
+from ilfo.agents.opolo import OPOLOConfig
 from ilfo.algos import AGENT_PARTS, ALGOS, PART_CONFIGS, Recipe, algos_using, recipe
 from ilfo.config import dataclass_from_dict
 from ilfo.rewards import DiscriminatorConfig, OOPSConfig, PWILConfig
@@ -86,9 +87,12 @@ class TrainConfig:
     config stay seed sweeps)."""
     pwil: PWILConfig | None = None
     """PWIL rewarder (algo pwil-td3); None: the paper's defaults (``PWILConfig()``)."""
+    opolo: OPOLOConfig | None = None
+    """OPOLO agent (algo opolo); None: the authors' settings for the env (``OPOLOConfig()``,
+    ``OPOLOConfig.hopper()`` on Hopper)."""
     discriminator: DiscriminatorConfig | None = None
-    """The (s, s') discriminator whose reward gaifo-td3 learns from; None: the OPOLO authors'
-    settings (``DiscriminatorConfig()``)."""
+    """The (s, s') discriminator whose reward gaifo-td3 and opolo learn from; None: the
+    authors' settings (``DiscriminatorConfig()`` at the agent's learning rate)."""
 
     def __post_init__(self) -> None:
         algo = recipe(self.algo)
@@ -160,12 +164,12 @@ class TrainConfig:
 
     def part_config(self, part: str) -> Any:
         """The config of part ``part`` (a field name: ``td3``, ``oops``, ...) as given, else its
-        default (the recipe's ``agent_default``, else the ``preset``'s, for an agent); a
+        default (the recipe's ``part_defaults``, else the ``preset``'s, for an agent); a
         ``seed`` field is always this run's seed, so that one seed sets a whole run (seed
         sweeps with a custom config stay seed sweeps)."""
         given = getattr(self, part)
-        if given is None and part == self.recipe.agent and self.recipe.agent_default:
-            given = self.recipe.agent_default()
+        if given is None and self.recipe.part_defaults is not None:
+            given = self.recipe.part_defaults(self.env).get(part)
         if given is None:
             given = AGENT_PARTS[part].default(self.preset) if part in AGENT_PARTS else None
             given = PART_CONFIGS[part]() if given is None else given
@@ -173,7 +177,7 @@ class TrainConfig:
             given = dataclasses.replace(given, seed=self.seed)
         return given
 
-    def agent_config(self, horizon: int) -> TD3Config | SACConfig:
+    def agent_config(self, horizon: int) -> TD3Config | SACConfig | OPOLOConfig:
         """The agent's config exactly as the run builds it, for episodes of ``horizon`` steps:
         what the trainer sets (``AgentPart.for_run``: TD3's ``max_time`` is the horizon, time
         augmentation only where observations carry the time feature), then the recipe's change

@@ -100,7 +100,8 @@ def reward_steps(
     num_steps: int,
 ) -> tuple[LearnedRewardState, dict[str, jax.Array]]:
     """``num_steps`` gradient steps of the reward, each on uniform draws of ``reward.batch_size``
-    replay transitions and as many expert ones; metrics averaged over the steps."""
+    replay transitions and as many expert ones; metrics averaged over the steps. ``state`` is
+    any pytree with fields ``reward`` (the reward's state) and ``key``."""
 
     def body(reward_state: Any, key: jax.Array):
         k_learner, k_expert, k_step = jax.random.split(key, 3)
@@ -118,25 +119,27 @@ def reward_steps(
     return state, jax.tree.map(jnp.mean, metrics)
 
 
-def with_learned_reward(
-    agent: TD3,
-    reward: LearnedReward,
-    expert: Transitions,
-    schedule: RewardSchedule,
-    time_feature: bool,
-) -> LearnedRewardAgent:
-    """TD3 trained on ``reward``, learned from ``expert`` transitions and the replay buffer's.
+class LearnedRewardSetup(NamedTuple):
+    """What an agent trained on a learned reward is built with (``ilfo.training.build``)."""
 
-    Args:
-        agent: the TD3 agent (``make_td3``); its updates run as ``agent.update`` would, on
-            batches rewarded by ``reward``.
-        reward: the learned reward (e.g. ``Discriminator``).
-        expert: the expert transitions (``expert_transitions``), environment observations.
-        schedule: when the reward takes its gradient steps.
-        time_feature: whether the agent's observations end with the time feature (dropped
-            before the reward sees them).
-    """
+    reward: LearnedReward
+    schedule: RewardSchedule
+    """When the reward takes its gradient steps."""
+    expert: Transitions
+    """The expert transitions (``expert_transitions``), environment observations."""
+    expert_agent_obs: jax.Array
+    """(M,) + agent obs shape: ``expert.obs`` as the agent sees them (the time feature of each
+    demo step appended where the run appends one), for agents that act on expert states."""
+    time_feature: bool
+    """Whether the agent's observations end with the time feature (dropped before the reward
+    sees them)."""
+
+
+def with_learned_reward(agent: TD3, setup: LearnedRewardSetup) -> LearnedRewardAgent:
+    """TD3 trained on ``setup.reward``, learned from the expert transitions and the replay
+    buffer's; its updates run as ``agent.update`` would, on batches rewarded by the reward."""
     cfg = agent.config
+    reward, expert, time_feature = setup.reward, setup.expert, setup.time_feature
 
     def init(seed: int) -> LearnedRewardState:
         key, k_reward = jax.random.split(jax.random.fold_in(jax.random.PRNGKey(seed), 1))
@@ -147,12 +150,12 @@ def with_learned_reward(
             key=key,
         )
 
-    def batch_rewards(state: LearnedRewardState, obs: jax.Array, next_obs: jax.Array):
-        obs, next_obs = (env_observations(x, time_feature) for x in (obs, next_obs))
-        return reward.reward(state.reward, obs, next_obs)
-
     def update_step(state: LearnedRewardState, batch: ReplayData, key: jax.Array, train_actor=None):
-        rewards = batch_rewards(state, batch.obs, batch.next_obs)
+        rewards = reward.reward(
+            state.reward,
+            env_observations(batch.obs, time_feature),
+            env_observations(batch.next_obs, time_feature),
+        )
         agent_state, out = agent.update_step(
             state.agent, batch._replace(reward=rewards), key, train_actor
         )
@@ -179,7 +182,7 @@ def with_learned_reward(
 
     def update(state: LearnedRewardState, data: ReplayData, size, num_updates: int):
         metrics: dict[str, jax.Array] = {}
-        due = schedule.steps_due(int(state.updates), num_updates)
+        due = setup.schedule.steps_due(int(state.updates), num_updates)
         if due:
             state, metrics = reward_steps_jit(state, data, size, expert, num_steps=due)
         state, agent_metrics = agent_updates_jit(state, data, size, num_updates=num_updates)
