@@ -1,5 +1,5 @@
-"""Benchmark the full training loop (`ilfo train`, OOPS + TD3 on Hopper-v5) against the
-update-only rate: where does a step's time go?
+"""Benchmark the full training loop (`ilfo train`, OOPS + TD3 on Hopper-v5 by default, any
+imitation algo with ``--algo``) against the update-only rate: where does a step's time go?
 
 A short ``Trainer`` run (fast preset by default; Hopper-v5; the bundled scripted demos, the
 first one imitated; ``--steps`` 20,000 of which ``--start-steps`` 10,000 random; evaluation and
@@ -8,7 +8,8 @@ checkpoints pushed past the end of the run) timed through the loop's ``LoopHooks
 
 - ``env``: ``trainer.env.step``;
 - ``act``: the policy's forward pass and exploration noise, synchronised (``np.asarray``);
-- ``reward``: the episode reward of an episode (the OT solve);
+- ``reward``: the episode reward of an episode (the OT solve; for a learned reward, its values
+  of the episode's transitions, logged as the proxy return; its training is in ``update``);
 - ``replay``: ``trainer.buffer.add_episode`` (the hook waits until the scatter is done);
 - ``update``: the episode's agent updates (every chunk, synchronised by reading the metrics);
 - ``other``: the rest of the learning phase's wall time (the Python loop around ``env.step``:
@@ -32,6 +33,7 @@ reported.
     python bench/train.py --updates-per-step 2   # two updates per environment step
     python bench/train.py --json             # one JSON line per figure
     python bench/train.py --quick            # 2,000 steps, 1,000 random (a smoke run)
+    python bench/train.py --algo opolo       # a baseline's loop
 """
 
 from __future__ import annotations
@@ -149,7 +151,7 @@ def run(args: argparse.Namespace) -> tuple[dict, list[dict]]:
     with tempfile.TemporaryDirectory(prefix="ilfo-bench-train-") as tmp:
         config = TrainConfig(
             env="Hopper-v5",
-            algo="oops-td3",
+            algo=args.algo,
             demos=str(bundled_demos("Hopper-v5-scripted")),
             num_demos=1,
             steps=args.steps,
@@ -230,6 +232,12 @@ def main() -> None:
     parser.add_argument("--json", action="store_true", help="one JSON line per figure")
     parser.add_argument("--quick", action="store_true", help="2,000 steps, 1,000 random")
     parser.add_argument("--preset", choices=("fast", "paper"), default="fast")
+    parser.add_argument(
+        "--algo",
+        choices=("oops-td3", "oops-ddpg", "pwil-td3", "gaifo-td3", "opolo"),
+        default="oops-td3",
+        help="the algorithm (gaifo-td3 and opolo: their authors' networks; --preset is OOPS's)",
+    )
     parser.add_argument("--steps", type=int, default=20_000, help="environment steps in all")
     parser.add_argument("--start-steps", type=int, default=10_000, help="random steps first")
     parser.add_argument("--seed", type=int, default=0)

@@ -29,7 +29,10 @@ def test_help_lists_every_agent_and_rewarder_flag_with_its_doc(capsys):
         ("--pwil-alpha", "Reward amplitude alpha. (default: 5.0)"),
     ]:
         assert flag in out and doc in out, flag
-    assert "TD3/DDPG agent (oops-td3, oops-ddpg, pwil-td3, td3; overrides the --preset)" in out
+    assert (
+        "TD3/DDPG agent (oops-td3, oops-ddpg, pwil-td3, gaifo-td3, td3; overrides the --preset)"
+        in out
+    )
     assert "OOPS rewarder (oops-td3, oops-ddpg, oops-sac)" in out
     # Set by the trainer, so not flags.
     assert "--td3-max-time" not in out and "--oops-seed" not in out

@@ -26,11 +26,13 @@ import numpy as np
 from ilfo.agents import SACConfig, TD3Config, ddpg_config, make_sac, make_td3
 from ilfo.agents.opolo import OPOLOConfig, make_opolo
 from ilfo.rewards import (
+    FIRL,
     OOPS,
     PWIL,
     Discriminator,
     DiscriminatorConfig,
     EpisodeReward,
+    FIRLConfig,
     LearnedReward,
     OOPSConfig,
     PWILConfig,
@@ -84,7 +86,11 @@ class LearnedRewardPart(Part):
     make: Callable[[Any], LearnedReward]
     """``make(config)`` -> the reward."""
     schedule: Callable[[Any], Any]
-    """``schedule(config)`` -> its ``RewardSchedule`` (when it takes gradient steps)."""
+    """``schedule(config)`` -> its ``RewardSchedule`` (when it takes gradient steps on replay
+    and expert batches), or None."""
+    rollouts: Callable[[Any], Any] | None = None
+    """``rollouts(config)`` -> its ``RolloutPlan`` where it learns from fresh episodes of the
+    policy (f-IRL); None otherwise."""
 
 
 @dataclass(frozen=True)
@@ -127,6 +133,12 @@ def _td3_for_run(config: TD3Config, horizon: int, fixed_horizon: bool) -> TD3Con
     return dataclasses.replace(
         config, time_augmentation=config.time_augmentation and fixed_horizon, max_time=horizon
     )
+
+
+def _sac_learning(config: SACConfig, obs_dim: int, action_dim: int, max_action: float, setup):
+    from ilfo.training.learned import with_learned_reward
+
+    return with_learned_reward(make_sac(config, obs_dim, action_dim, max_action), setup)
 
 
 def _td3_learning(config: TD3Config, obs_dim: int, action_dim: int, max_action: float, setup):
@@ -182,6 +194,7 @@ AGENT_PARTS: dict[str, AgentPart] = {
         config=SACConfig,
         make=make_sac,
         default=lambda preset: SACConfig(),
+        make_learning=_sac_learning,
         for_run=lambda config, horizon, fixed_horizon: config,
         title="SAC agent",
         description="Defaults: Haarnoja et al. 2018.",
@@ -198,6 +211,27 @@ AGENT_PARTS: dict[str, AgentPart] = {
     ),
 }
 """The agents, by the name of their ``TrainConfig`` field."""
+
+
+def _firl_defaults(env_id: str) -> dict[str, Any]:
+    """The f-IRL authors' MuJoCo configs: SAC 256-256, Adam 1e-3, fixed temperature 0.2, batch
+    100, tau 0.005, gamma 0.99; on Ant a 128-128 reward network and 6 discriminator blocks."""
+    sac = SACConfig(
+        batch_size=100,
+        lr_actor=1e-3,
+        lr_critic=1e-3,
+        init_temperature=0.2,
+        autotune=False,
+    )
+    ant = env_id.startswith("Ant")
+    firl = FIRLConfig(reward_hidden=(128, 128), disc_blocks=6) if ant else FIRLConfig()
+    return {"sac": sac, "firl": firl}
+
+
+def _firl_rollouts(config: FIRLConfig) -> Any:
+    from ilfo.training.learned import RolloutPlan
+
+    return RolloutPlan(config.iteration_steps, config.rollouts)
 
 
 def _discriminator_schedule(config: DiscriminatorConfig) -> Any:
@@ -228,6 +262,14 @@ REWARD_PARTS: dict[str, RewardPart | LearnedRewardPart] = {
         title="(s, s') discriminator reward",
         description="Defaults: the OPOLO authors' code (MuJoCo).",
     ),
+    "firl": LearnedRewardPart(
+        config=FIRLConfig,
+        make=FIRL,
+        schedule=lambda config: None,
+        rollouts=_firl_rollouts,
+        title="f-IRL (FKL) reward",
+        description="Defaults: the authors' MuJoCo configs (Ant: reward 128-128, 6 blocks).",
+    ),
 }
 """The imitation rewards (episode and learned), by the name of their ``TrainConfig`` field."""
 
@@ -249,6 +291,13 @@ RECIPES: tuple[Recipe, ...] = (
         "discriminator",
         "OPOLO: discriminator reward, DICE critic, inverse-dynamics regularised actor (Zhu 2020)",
         part_defaults=_opolo_defaults,
+    ),
+    Recipe(
+        "firl-fkl",
+        "sac",
+        "firl",
+        "f-IRL (FKL): a state-only reward network by state-marginal matching + SAC (Ni 2020)",
+        part_defaults=_firl_defaults,
     ),
     Recipe("td3", "td3", None, "TD3 on the task reward (no demos)"),
     Recipe("sac", "sac", None, "SAC on the task reward (no demos; ilfo's experts)"),

@@ -141,6 +141,27 @@ class SAC(NamedTuple):
     q_values: Callable[[SACState, jax.Array, jax.Array], jax.Array]
     """q_values(state, obs (..., obs_dim), action (..., action_dim)) -> (num_critics, ...): the
     online critics' values, observations normalised as in training (for diagnostics)."""
+    update_step: Callable[..., tuple[SACState, tuple[jax.Array, ...]]]
+    """update_step(state, batch, key) -> (state, outputs): one update on one batch, not jitted,
+    for updates that wrap it (a learned reward relabels ``batch.reward`` first)."""
+    run_updates: Callable[..., tuple[Any, tuple[jax.Array, ...]]]
+    """run_updates(step, state, data, size, num_updates, updates_done) -> (state, outputs):
+    ``num_updates`` applications of ``step`` (``update_step`` or a wrapper of it, on any state
+    with a ``key``) in one ``lax.scan``, as ``update`` runs them."""
+    metrics_of: Callable[[tuple[jax.Array, ...], SACState], dict[str, jax.Array]]
+    """metrics_of(stacked outputs, final state) -> the scalar metrics ``update`` reports."""
+
+
+def sac_metrics(outs: tuple[jax.Array, ...], state: SACState) -> dict[str, jax.Array]:
+    """Scalar metrics of stacked ``update_step`` outputs and the final state."""
+    c_loss, a_loss, q_mean, entropy = outs[:4]
+    return {
+        "critic_loss": jnp.mean(c_loss),
+        "actor_loss": jnp.mean(a_loss),
+        "q_mean": jnp.mean(q_mean),
+        "entropy": jnp.mean(entropy),
+        "temperature": jnp.exp(state.log_temperature),
+    }
 
 
 def make_sac(
@@ -280,17 +301,11 @@ def make_sac(
         scalar metrics: mean critic loss, actor loss, Q, policy entropy, and the final
         temperature."""
 
-        state, (c_loss, a_loss, q_mean, entropy) = scan_updates(
-            update_step, state, data, size, num_updates, cfg.batch_size
-        )
-        metrics = {
-            "critic_loss": jnp.mean(c_loss),
-            "actor_loss": jnp.mean(a_loss),
-            "q_mean": jnp.mean(q_mean),
-            "entropy": jnp.mean(entropy),
-            "temperature": jnp.exp(state.log_temperature),
-        }
-        return state, metrics
+        state, outs = scan_updates(update_step, state, data, size, num_updates, cfg.batch_size)
+        return state, sac_metrics(outs, state)
+
+    def run_updates(step, state, data, size, num_updates: int, updates_done):
+        return scan_updates(step, state, data, size, num_updates, cfg.batch_size)
 
     return SAC(
         config=cfg,
@@ -302,4 +317,7 @@ def make_sac(
         update=jax.jit(update, static_argnames="num_updates"),
         set_normalizer=make_normalizer_setter(obs_dim, time_feature=False),
         q_values=q_values,
+        update_step=update_step,
+        run_updates=run_updates,
+        metrics_of=sac_metrics,
     )

@@ -226,6 +226,13 @@ class TD3(NamedTuple):
     deterministic; else Gaussian exploration noise, clipped to [-max_action, max_action]."""
     update: Callable[..., tuple[TD3State, dict[str, jax.Array]]]
     """update(state, data: ReplayData, size, num_updates) -> (state, metrics)."""
+    run_updates: Callable[..., tuple[Any, tuple[jax.Array, ...]]]
+    """run_updates(step, state, data, size, num_updates, updates_done) -> (state, outputs):
+    ``num_updates`` applications of ``step`` (``update_step`` or a wrapper of it, on any state
+    with a ``key``) in one ``lax.scan``, as ``update`` runs them (``delayed_updates``; the actor
+    trained on every ``policy_delay``-th counting from ``updates_done``)."""
+    metrics_of: Callable[[tuple[jax.Array, ...], TD3State], dict[str, jax.Array]]
+    """metrics_of(stacked outputs, final state) -> the scalar metrics ``update`` reports."""
     update_step: Callable[..., tuple[TD3State, tuple[jax.Array, ...]]]
     """update_step(state, batch, key, train_actor=None, actor_term=None) -> (state, outputs):
     one update on one batch, not jitted, for updates that wrap it (a learned reward relabels
@@ -569,6 +576,11 @@ def make_td3(
         )
         return state, td3_metrics(outs)
 
+    def run_updates(step, state, data, size, num_updates: int, updates_done):
+        return delayed_updates(
+            step, cfg.policy_delay, updates_done, state, data, size, num_updates, cfg.batch_size
+        )
+
     return TD3(
         config=cfg,
         obs_dim=obs_dim,
@@ -578,6 +590,8 @@ def make_td3(
         act=act,
         update=jax.jit(update, static_argnames="num_updates"),
         update_step=update_step,
+        run_updates=run_updates,
+        metrics_of=lambda outs, state: td3_metrics(outs),
         set_normalizer=make_normalizer_setter(obs_dim, cfg.time_augmentation),
         q_values=q_values,
     )

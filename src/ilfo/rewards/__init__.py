@@ -10,6 +10,7 @@ from ilfo.rewards.base import (
     make_atoms,
 )
 from ilfo.rewards.discriminator import Discriminator, DiscriminatorConfig, DiscriminatorState
+from ilfo.rewards.firl import FIRL, FIRLConfig, FIRLState, fkl_surrogate
 from ilfo.rewards.learned import (
     LearnedReward,
     Transitions,
@@ -20,12 +21,15 @@ from ilfo.rewards.oops import OOPS, OOPSConfig
 from ilfo.rewards.pwil import PWIL, PWILConfig
 
 __all__ = [
+    "FIRL",
     "OOPS",
     "PWIL",
     "Discriminator",
     "DiscriminatorConfig",
     "DiscriminatorState",
     "EpisodeReward",
+    "FIRLConfig",
+    "FIRLState",
     "LearnedReward",
     "OOPSConfig",
     "PWILConfig",
@@ -34,6 +38,7 @@ __all__ = [
     "Standardizer",
     "Transitions",
     "expert_transitions",
+    "fkl_surrogate",
     "make_atoms",
     "sample_transitions",
 ]

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 import gymnasium as gym
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -148,19 +149,38 @@ def make_agent(config: TrainConfig, env: EnvInfo, demos: Sequence[np.ndarray] | 
 
     reward_config = config.part_config(algo.reward)
     reward = reward_part.make(reward_config)
-    if demos is None:
-        demos = [np.zeros((2, env.obs_dim), np.float32)] * reward.batch_size
+    schedule = reward_part.schedule(reward_config)
+    rollouts = None if reward_part.rollouts is None else reward_part.rollouts(reward_config)
+    if demos is None:  # a template: the shapes matter, not the values
+        demos = [np.zeros((env.horizon + 1, env.obs_dim), np.float32)] * reward.batch_size
     setup = LearnedRewardSetup(
         reward=reward,
-        schedule=reward_part.schedule(reward_config),
-        expert=expert_transitions(demos, min_count=reward.batch_size),
+        schedule=schedule,
+        # Batches are drawn with replacement; a batch larger than the demos would hide that
+        # they are too few for the algo's settings.
+        expert=expert_transitions(demos, min_count=reward.batch_size if schedule else 1),
         expert_agent_obs=jnp.asarray(
             np.concatenate([agent_observations(d, env.horizon, time_feature)[:-1] for d in demos])
         ),
         time_feature=time_feature,
+        rollouts=rollouts,
+        expert_trajectories=None if rollouts is None else expert_trajectories(demos, env.horizon),
     )
     functions = part.make_learning(agent_config, *dims, setup)
     return Agent(functions, time_feature)
+
+
+def expert_trajectories(demos: Sequence[np.ndarray], horizon: int) -> jax.Array:
+    """(E, horizon, obs_dim): each demo's states s_1..s_horizon, what the expert visits in an
+    episode of ``horizon`` steps (the states a policy's rollouts are compared with); a
+    ValueError where a demo is shorter."""
+    short = [i for i, d in enumerate(demos) if len(d) < horizon + 1]
+    if short:
+        raise ValueError(
+            f"demos {short} have fewer than the episode horizon's {horizon} steps: a reward "
+            "learned from whole episodes compares them with the policy's (pass --horizon)"
+        )
+    return jnp.asarray(np.stack([np.asarray(d[1 : horizon + 1], np.float32) for d in demos]))
 
 
 def make_reward(config: TrainConfig, demos: list[np.ndarray]) -> EpisodeReward | None:

@@ -14,7 +14,7 @@ from ilfo.agents import SACConfig, TD3Config
 from ilfo.agents.opolo import OPOLOConfig
 from ilfo.algos import AGENT_PARTS, ALGOS, PART_CONFIGS, Recipe, algos_using, recipe
 from ilfo.config import dataclass_from_dict
-from ilfo.rewards import DiscriminatorConfig, OOPSConfig, PWILConfig
+from ilfo.rewards import DiscriminatorConfig, FIRLConfig, OOPSConfig, PWILConfig
 
 Algo = Literal[tuple(ALGOS)]  # type: ignore[valid-type]
 """The names of ``ilfo.algos.ALGOS``, made from the registry (the CLI's ``--algo`` choices)."""
@@ -80,7 +80,8 @@ class TrainConfig:
     the episode horizon, keeps ``time_augmentation`` only where observations carry the time
     feature (fixed-horizon runs), and applies ``ddpg_config`` for oops-ddpg."""
     sac: SACConfig | None = None
-    """SAC agent (algos oops-sac, sac); None: ``SACConfig()``, Haarnoja et al.'s defaults."""
+    """SAC agent (algos oops-sac, firl-fkl, sac); None: ``SACConfig()``, Haarnoja et al.'s
+    defaults (firl-fkl: the f-IRL authors' SAC)."""
     oops: OOPSConfig | None = None
     """OOPS rewarder (algos oops-*); None: the paper's defaults. Its ``seed`` is always replaced
     by this config's ``seed``, so that one seed sets a whole run (seed sweeps with a custom OOPS
@@ -93,6 +94,8 @@ class TrainConfig:
     discriminator: DiscriminatorConfig | None = None
     """The (s, s') discriminator whose reward gaifo-td3 and opolo learn from; None: the
     authors' settings (``DiscriminatorConfig()`` at the agent's learning rate)."""
+    firl: FIRLConfig | None = None
+    """f-IRL's reward (algo firl-fkl); None: the authors' settings for the env."""
 
     def __post_init__(self) -> None:
         algo = recipe(self.algo)

@@ -1,4 +1,4 @@
-"""An off-policy agent trained on a learned reward: TD3 whose batches are rewarded by a
+"""An off-policy agent trained on a learned reward: TD3 or SAC whose batches are rewarded by a
 ``LearnedReward`` (a discriminator) with its current parameters, the reward trained beside it.
 
 ``with_learned_reward`` composes the two into one agent with the loop's ``AgentFunctions``
@@ -20,7 +20,8 @@ import jax
 import jax.numpy as jnp
 from numpy.typing import ArrayLike
 
-from ilfo.agents.td3 import TD3, delayed_updates, td3_metrics
+from ilfo.agents.sac import SAC
+from ilfo.agents.td3 import TD3
 from ilfo.replay import ReplayData, sample_batch
 from ilfo.rewards.learned import LearnedReward, Transitions, sample_transitions
 
@@ -36,6 +37,16 @@ class RewardSchedule(NamedTuple):
         """Reward steps due before agent updates updates_done + 1 ... + num_updates."""
         crossed = (updates_done + num_updates) // self.every - updates_done // self.every
         return self.steps * crossed
+
+
+class RolloutPlan(NamedTuple):
+    """For a reward that learns from fresh episodes of the current policy (f-IRL): every
+    ``every`` environment steps, the loop collects ``episodes`` stochastic fixed-horizon
+    episodes (not stored, not counted as training steps) and passes their states s_1..s_T to
+    ``learn_from_rollouts``."""
+
+    every: int
+    episodes: int
 
 
 @flax.struct.dataclass
@@ -82,6 +93,13 @@ class LearnedRewardAgent(NamedTuple):
     rewards: Callable[[LearnedRewardState, jax.Array, jax.Array], jax.Array]
     """rewards(state, obs, next_obs) -> (B,): the reward's current values of environment
     transitions (no time feature), for logging an episode's proxy return."""
+    rollouts: RolloutPlan | None = None
+    """Where the reward learns from fresh episodes of the policy: when, and how many."""
+    learn_from_rollouts: Callable[..., tuple[LearnedRewardState, dict[str, jax.Array]]] | None = (
+        None
+    )
+    """learn_from_rollouts(state, trajectories (n, T, obs_dim)) -> (state, metrics): the
+    reward's learning from the policy's episodes (their states s_1..s_T) and the expert's."""
 
 
 def env_observations(obs: jax.Array, time_feature: bool) -> jax.Array:
@@ -123,8 +141,9 @@ class LearnedRewardSetup(NamedTuple):
     """What an agent trained on a learned reward is built with (``ilfo.training.build``)."""
 
     reward: LearnedReward
-    schedule: RewardSchedule
-    """When the reward takes its gradient steps."""
+    schedule: RewardSchedule | None
+    """When the reward takes its gradient steps on replay and expert batches; None: never
+    (a reward that learns from rollouts)."""
     expert: Transitions
     """The expert transitions (``expert_transitions``), environment observations."""
     expert_agent_obs: jax.Array
@@ -133,12 +152,17 @@ class LearnedRewardSetup(NamedTuple):
     time_feature: bool
     """Whether the agent's observations end with the time feature (dropped before the reward
     sees them)."""
+    rollouts: RolloutPlan | None = None
+    """For a reward that learns from the policy's episodes (``update_from_rollouts``)."""
+    expert_trajectories: jax.Array | None = None
+    """(E, T, obs_dim) the demos' states s_1..s_T, T the episode horizon (with ``rollouts``)."""
 
 
-def with_learned_reward(agent: TD3, setup: LearnedRewardSetup) -> LearnedRewardAgent:
-    """TD3 trained on ``setup.reward``, learned from the expert transitions and the replay
-    buffer's; its updates run as ``agent.update`` would, on batches rewarded by the reward."""
-    cfg = agent.config
+def with_learned_reward(agent: TD3 | SAC, setup: LearnedRewardSetup) -> LearnedRewardAgent:
+    """``agent`` (TD3 or SAC: any agent with ``update_step``, ``run_updates`` and
+    ``metrics_of``) trained on ``setup.reward``, learned from the expert transitions and the
+    replay buffer's; its updates run as ``agent.update`` would, on batches rewarded by the
+    reward."""
     reward, expert, time_feature = setup.reward, setup.expert, setup.time_feature
 
     def init(seed: int) -> LearnedRewardState:
@@ -150,30 +174,23 @@ def with_learned_reward(agent: TD3, setup: LearnedRewardSetup) -> LearnedRewardA
             key=key,
         )
 
-    def update_step(state: LearnedRewardState, batch: ReplayData, key: jax.Array, train_actor=None):
+    def update_step(state: LearnedRewardState, batch: ReplayData, key: jax.Array, **kwargs):
         rewards = reward.reward(
             state.reward,
             env_observations(batch.obs, time_feature),
             env_observations(batch.next_obs, time_feature),
         )
         agent_state, out = agent.update_step(
-            state.agent, batch._replace(reward=rewards), key, train_actor
+            state.agent, batch._replace(reward=rewards), key, **kwargs
         )
         state = state.replace(agent=agent_state, updates=state.updates + 1)
         return state, (*out, jnp.mean(rewards))
 
     def agent_updates(state: LearnedRewardState, data: ReplayData, size, num_updates: int):
-        state, outs = delayed_updates(
-            update_step,
-            cfg.policy_delay,
-            state.agent.step,
-            state,
-            data,
-            size,
-            num_updates,
-            cfg.batch_size,
+        state, outs = agent.run_updates(
+            update_step, state, data, size, num_updates, state.agent.step
         )
-        return state, {**td3_metrics(outs), "reward_mean": jnp.mean(outs[4])}
+        return state, {**agent.metrics_of(outs, state.agent), "reward_mean": jnp.mean(outs[-1])}
 
     agent_updates_jit = jax.jit(agent_updates, static_argnames="num_updates")
     reward_steps_jit = jax.jit(
@@ -182,7 +199,11 @@ def with_learned_reward(agent: TD3, setup: LearnedRewardSetup) -> LearnedRewardA
 
     def update(state: LearnedRewardState, data: ReplayData, size, num_updates: int):
         metrics: dict[str, jax.Array] = {}
-        due = setup.schedule.steps_due(int(state.updates), num_updates)
+        due = (
+            0
+            if setup.schedule is None
+            else setup.schedule.steps_due(int(state.updates), num_updates)
+        )
         if due:
             state, metrics = reward_steps_jit(state, data, size, expert, num_steps=due)
         state, agent_metrics = agent_updates_jit(state, data, size, num_updates=num_updates)
@@ -190,6 +211,22 @@ def with_learned_reward(agent: TD3, setup: LearnedRewardSetup) -> LearnedRewardA
 
     def set_normalizer(state: LearnedRewardState, mean: ArrayLike, std: ArrayLike):
         return state.replace(agent=agent.set_normalizer(state.agent, mean, std))
+
+    learn_from_rollouts = None
+    if setup.rollouts is not None:
+
+        def learn(state: LearnedRewardState, trajectories: jax.Array, expert_trajs: jax.Array):
+            key, k_reward = jax.random.split(state.key)
+            reward_state, metrics = reward.update_from_rollouts(  # type: ignore[attr-defined]
+                state.reward, trajectories, expert_trajs, k_reward
+            )
+            return state.replace(reward=reward_state, key=key), metrics
+
+        learn_jit = jax.jit(learn)
+
+        def learn_from_rollouts(state: LearnedRewardState, trajectories: Any):
+            trajectories = jnp.asarray(trajectories, jnp.float32)
+            return learn_jit(state, trajectories, setup.expert_trajectories)
 
     return LearnedRewardAgent(
         obs_dim=agent.obs_dim,
@@ -201,4 +238,6 @@ def with_learned_reward(agent: TD3, setup: LearnedRewardSetup) -> LearnedRewardA
         set_normalizer=set_normalizer,
         q_values=lambda state, obs, action: agent.q_values(state.agent, obs, action),
         rewards=jax.jit(lambda state, obs, next_obs: reward.reward(state.reward, obs, next_obs)),
+        rollouts=setup.rollouts,
+        learn_from_rollouts=learn_from_rollouts,
     )

@@ -40,7 +40,12 @@ from ilfo.training.checkpoint import Checkpoint, load_checkpoint, save_checkpoin
 from ilfo.training.config import TrainConfig, config_from_dict
 from ilfo.training.metrics import MetricsLog, truncate_metrics
 from ilfo.training.plots import plot_runs
-from ilfo.training.rollout import agent_observation, agent_observations, score_policy
+from ilfo.training.rollout import (
+    agent_observation,
+    agent_observations,
+    rollout_policy,
+    score_policy,
+)
 from ilfo.training.run_dir import (
     BEST_POLICY_FILE,
     BEST_POLICY_INFO,
@@ -55,14 +60,8 @@ from ilfo.training.run_dir import (
 )
 
 _NOTHING = contextlib.nullcontext()
-_LOGGED_UPDATE_METRICS = {
-    "critic_loss",
-    "actor_loss",
-    "reward_mean",
-    "reward_loss",
-    "reward_accuracy",
-}
-"""The update metrics that episode rows log (``metrics.METRIC_FIELDS``)."""
+_LOGGED = {"critic_loss", "actor_loss", "reward_mean", "reward_loss", "reward_accuracy"}
+"""The update and reward metrics that episode rows log (``metrics.METRIC_FIELDS``)."""
 
 
 class LoopHooks:
@@ -233,7 +232,8 @@ class Trainer:
             # The agent's update rewards its batches with the reward's parameters of the time;
             # these (today's, stored but not learned from) are the episode's proxy return.
             funcs = self.agent.functions
-            rewards = np.asarray(funcs.rewards(self.state, observations[:-1], observations[1:]))
+            with self.hooks.timed("reward"):
+                rewards = np.asarray(funcs.rewards(self.state, observations[:-1], observations[1:]))
         else:
             rewards = np.asarray(task_rewards)
             if cfg.uses_fixed_horizon:
@@ -258,6 +258,14 @@ class Trainer:
             with self.hooks.timed("update"):
                 self.state, metrics = self._update(num_steps * cfg.updates_per_step)
             row.update({name: round(value, 5) for name, value in metrics.items()})
+        plan = getattr(self.agent.functions, "rollouts", None)
+        if plan is not None and self.step // plan.every > (self.step - num_steps) // plan.every:
+            with self.hooks.timed("reward"):
+                trajectories = self._policy_rollouts(plan.episodes, self.step // plan.every)
+                self.state, metrics = self.agent.functions.learn_from_rollouts(
+                    self.state, trajectories
+                )
+            row.update({k: round(float(v), 5) for k, v in metrics.items() if k in _LOGGED})
         if self.step // cfg.eval_every > (self.step - num_steps) // cfg.eval_every:
             with self.hooks.timed("evaluate"):
                 self.last_eval = self.evaluate()
@@ -295,6 +303,29 @@ class Trainer:
                 break
         return np.asarray(observations), actions, task_rewards, env_terminated, terminated
 
+    def _policy_rollouts(self, episodes: int, iteration: int) -> np.ndarray:
+        """States s_1..s_T (episodes, T, obs_dim) of fresh fixed-horizon episodes of the current
+        policy with its exploration, for a reward that learns from them (f-IRL); not stored,
+        not counted as steps. A fall that ends an episode early (standard episodes) repeats
+        its last state to the horizon, as f-IRL's code does. Their randomness comes from
+        (seed, iteration) alone."""
+        rng = np.random.default_rng([self.config.seed, iteration, 1])
+        key = jax.random.fold_in(jax.random.PRNGKey(self.config.seed), 1_000_003 + iteration)
+        trajectories = []
+        for k in range(episodes):
+            rollout = rollout_policy(
+                self.env,
+                self.agent,
+                self.state,
+                self.horizon,
+                seed=int(rng.integers(2**31)),
+                key=jax.random.fold_in(key, k),
+            )
+            states = rollout.observations[1:]
+            pad = np.repeat(states[-1:], self.horizon - len(states), axis=0)
+            trajectories.append(np.concatenate([states, pad]).astype(np.float32))
+        return np.stack(trajectories)
+
     def _update(self, num_updates: int) -> tuple[Any, dict[str, float]]:
         """``num_updates`` agent updates, run as jitted chunks of power-of-two sizes.
 
@@ -311,7 +342,7 @@ class Trainer:
                 state, metrics = self.agent.functions.update(
                     state, self.buffer.data, self.buffer.size, num_updates=chunk
                 )
-                for name in _LOGGED_UPDATE_METRICS.intersection(metrics):
+                for name in _LOGGED.intersection(metrics):
                     totals[name] = totals.get(name, 0.0) + float(metrics[name]) * chunk
                     weights[name] = weights.get(name, 0) + chunk
                 remaining -= chunk

@@ -54,17 +54,30 @@ class Rollout(NamedTuple):
 
 
 def rollout_policy(
-    env: Any, agent: Agent, state: Any, horizon: int, seed: int, render: bool = False
+    env: Any,
+    agent: Agent,
+    state: Any,
+    horizon: int,
+    seed: int,
+    render: bool = False,
+    key: Any = None,
 ) -> Rollout:
-    """A deterministic fixed-horizon episode of the agent's policy (``state``: an agent state
-    or a ``Policy``)."""
+    """A fixed-horizon episode of the agent's policy (``state``: an agent state or a
+    ``Policy``): deterministic, or with the policy's exploration where ``key`` (a JAX key) is
+    given (step t's key: ``jax.random.fold_in(key, t)``)."""
+    import jax
+
     policy = policy_of(state)
     obs, _ = env.reset(seed=seed)
     observations, rewards, terminated_flags = [obs], [], []
     frames = []
+    step_keys = None if key is None else np.asarray(jax.random.split(key, horizon))
     for t in range(horizon):
         agent_obs = agent_observation(obs, t, horizon, agent.time_feature)
-        action = np.asarray(agent.functions.act(policy, agent_obs))
+        if step_keys is None:
+            action = np.asarray(agent.functions.act(policy, agent_obs))
+        else:
+            action = np.asarray(agent.functions.act(policy, agent_obs, step_keys[t]))
         obs, reward, terminated, truncated, info = env.step(action.astype(np.float64))
         if render:
             frames.append(env.render())
