@@ -234,9 +234,9 @@ def main() -> None:
     parser.add_argument("--preset", choices=("fast", "paper"), default="fast")
     parser.add_argument(
         "--algo",
-        choices=("oops-td3", "oops-ddpg", "pwil-td3", "gaifo-td3", "opolo"),
+        choices=("oops-td3", "oops-ddpg", "pwil-td3", "gaifo-td3", "opolo", "firl-fkl"),
         default="oops-td3",
-        help="the algorithm (gaifo-td3 and opolo: their authors' networks; --preset is OOPS's)",
+        help="the algorithm (the baselines with their authors' settings; --preset is OOPS's)",
     )
     parser.add_argument("--steps", type=int, default=20_000, help="environment steps in all")
     parser.add_argument("--start-steps", type=int, default=10_000, help="random steps first")

@@ -1,0 +1,64 @@
+"""The ``ilfo`` command line: thin wrappers over the library, one module per command group
+(``train``: train, eval, plot; ``experts``: expert train / export / eval; ``data``: reward,
+demos info / convert / collect)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from collections.abc import Sequence
+from typing import TextIO
+
+from ilfo.cli._common import _command as _command  # re-exported: ilfo.cli._command
+from ilfo.cli.data import _add_demos_parser, _add_reward_parser
+from ilfo.cli.experts import _add_expert_parser
+from ilfo.cli.train import _add_eval_parser, _add_plot_parser, _add_train_parser
+from ilfo.compilation_cache import enable_compilation_cache
+
+__all__ = ["main"]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``ilfo`` console script."""
+    parser = argparse.ArgumentParser(
+        prog="ilfo",
+        description="Imitation learning from observation (OOPS and its peers).",
+        epilog="Compiled programs are cached in ~/.cache/ilfo/jax ($XDG_CACHE_HOME/ilfo/jax), so "
+        "later starts of the same setting compile less; ILFO_COMPILATION_CACHE=DIR moves the "
+        "cache, ILFO_COMPILATION_CACHE=off turns it off.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    _add_train_parser(sub)
+    _add_eval_parser(sub)
+    _add_plot_parser(sub)
+    _add_expert_parser(sub)
+    _add_reward_parser(sub)
+    _add_demos_parser(sub)
+    args = parser.parse_args(argv)
+    try:
+        with warnings.catch_warnings():  # restores the default display on the way out
+            warnings.showwarning = _show_warning
+            enable_compilation_cache()  # before the first compilation; see its module
+            return args.run(args)
+    except (ValueError, FileNotFoundError) as err:
+        print(f"ilfo: error: {err}", file=sys.stderr)
+        return 2
+    except OSError as err:  # a read-only or full disk, a path under a file: what and where
+        where = f"{err.filename}: " if err.filename else ""
+        print(f"ilfo: error: {where}{err.strerror or err}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+
+
+def _show_warning(
+    message: Warning | str,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    file: TextIO | None = None,
+    line: str | None = None,
+) -> None:
+    """A warning for a command-line user: one line, without the source line it came from."""
+    print(f"ilfo: warning: {message}", file=sys.stderr if file is None else file)

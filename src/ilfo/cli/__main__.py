@@ -1,0 +1,5 @@
+"""``python -m ilfo.cli``."""
+
+from ilfo.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,238 @@
+"""``ilfo reward`` and ``ilfo demos info | convert | collect``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import fields
+from pathlib import Path
+
+import numpy as np
+
+from ilfo import demos
+from ilfo.paths import bundled_demos
+from ilfo.rewards import OOPS, PWIL, OOPSConfig
+
+
+def _add_reward_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "reward",
+        help="Score learner episodes against expert demos with the OOPS (or PWIL) reward.",
+        description=(
+            "Compute per-step OT rewards of learner episodes against a demonstration and print "
+            "one line per episode. By default: the bundled Hopper-v5 scripted rollouts, demo 0 "
+            "as the expert, and as learners another episode of the same policy, that demo plus "
+            "noise, and a random-action episode."
+        ),
+    )
+    p.add_argument("--demos", default=None, help="demo .npz file (default: bundled Hopper-v5)")
+    p.add_argument("--expert", type=int, default=0, help="index of the expert episode")
+    p.add_argument(
+        "--learners", type=int, nargs="*", default=None, help="indices of learner episodes"
+    )
+    p.add_argument(
+        "--rewarder", choices=["oops", "pwil"], default="oops", help="reward (default oops)"
+    )
+    docs = {f.name: (f.default, f.type) for f in fields(OOPSConfig)}
+    p.add_argument(
+        "--solver",
+        default=docs["solver"][0],
+        choices=["sinkhorn", "emd", "greedy"],
+        help=f"OOPS coupling (default {docs['solver'][0]})",
+    )
+    p.add_argument(
+        "--metric",
+        default=docs["metric"][0],
+        choices=["sqrt_euclidean", "euclidean", "sqeuclidean", "cosine"],
+        help=f"OOPS ground cost (default {docs['metric'][0]})",
+    )
+    p.add_argument(
+        "--atoms",
+        default=docs["atoms"][0],
+        choices=["transitions", "states"],
+        help=f"OOPS atoms: (s, s') or s (default {docs['atoms'][0]})",
+    )
+    p.add_argument(
+        "--reg",
+        type=float,
+        default=docs["reg"][0],
+        help=f"Sinkhorn lambda (default {docs['reg'][0]})",
+    )
+    p.add_argument("--json", action="store_true", help="one JSON line per episode")
+    p.set_defaults(run=_run_reward)
+
+
+def _run_reward(args: argparse.Namespace) -> int:
+    path = args.demos or bundled_demos("Hopper-v5-scripted")
+    data = demos.load(path)
+    episodes = [e.observations for e in data.episodes]
+    if not 0 <= args.expert < len(episodes):
+        raise ValueError(f"--expert {args.expert} out of range: the file has {len(episodes)}")
+    expert = episodes[args.expert]
+    learners: list[tuple[str, np.ndarray]] = []
+    if args.learners is None:
+        noisy = expert + np.random.default_rng(0).normal(0.0, 0.01, expert.shape)
+        others = [i for i in range(len(episodes)) if i != args.expert]
+        learners.append(("expert + N(0, 0.01^2) noise", noisy))
+        if others:
+            learners.append((f"episode {others[0]}", episodes[others[0]]))
+            learners.append((f"episode {others[-1]}", episodes[others[-1]]))
+    else:
+        for i in args.learners:
+            if not 0 <= i < len(episodes):
+                raise ValueError(f"learner {i} out of range: the file has {len(episodes)}")
+            learners.append((f"episode {i}", episodes[i]))
+    if args.rewarder == "pwil":
+        rewarder = PWIL([expert])
+    else:
+        cfg = OOPSConfig(solver=args.solver, metric=args.metric, atoms=args.atoms, reg=args.reg)
+        rewarder = OOPS([expert], cfg)
+    if not args.json:
+        print(f"{data.env_id} demos from {path}: expert = episode {args.expert}")
+        print(
+            f"{'learner':30s} {'OT distance':>12s} {'mean reward':>12s} "
+            f"{'iters':>6s} {'conv':>5s} {'ms':>8s}"
+        )
+    for name, obs in learners:
+        start = time.perf_counter()
+        out = rewarder(obs)
+        ms = 1e3 * (time.perf_counter() - start)
+        row = {
+            "learner": name,
+            "ot_distance": out.distance,
+            "mean_reward": float(out.rewards.mean()),
+            "iterations": out.coupling.iterations,
+            "converged": out.coupling.converged,
+            "marginal_error": out.coupling.marginal_error,
+            "ms": ms,
+        }
+        if args.json:
+            print(json.dumps(row))
+        else:
+            print(
+                f"{name:30s} {out.distance:12.4f} {row['mean_reward']:12.4f} "
+                f"{out.coupling.iterations!s:>6s} {out.coupling.converged!s:>5s} {ms:8.1f}"
+            )
+    return 0
+
+
+def _add_demos_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "demos",
+        help="Inspect and convert demonstration files (ilfo .npz, Minari, D4RL, imitation).",
+    )
+    dsub = p.add_subparsers(dest="demos_command", required=True)
+    i = dsub.add_parser(
+        "info",
+        help="Episodes, lengths, dims, returns, env id and provenance of a demo file.",
+        description="Describe a demonstration file of any format `ilfo demos convert` reads.",
+    )
+    i.add_argument("file", help="ilfo/imitation .npz, Minari/D4RL .hdf5, or a Minari dataset dir")
+    i.add_argument("--json", action="store_true", help="print one JSON object")
+    i.set_defaults(run=_run_demos_info)
+    c = dsub.add_parser(
+        "convert",
+        help="Convert a Minari, D4RL or imitation file (or an ilfo one) to ilfo's .npz.",
+        description=(
+            "Read IN (ilfo or imitation .npz, Minari or D4RL HDF5, Minari dataset directory; the "
+            "format is detected from the contents) and write OUT in ilfo's .npz format. D4RL and "
+            "imitation files do not record their environment: pass --env-id."
+        ),
+    )
+    c.add_argument("input", metavar="IN", help="demonstration file or Minari dataset directory")
+    c.add_argument("output", metavar="OUT", help="ilfo .npz to write")
+    c.add_argument("--env-id", default=None, help="environment id to record (overrides IN's)")
+    c.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
+    c.set_defaults(run=_run_demos_convert)
+    k = dsub.add_parser(
+        "collect",
+        help="Deterministic full-length rollouts of an expert policy, saved as ilfo .npz.",
+        description=(
+            "Roll out an exported expert (a directory with expert.json and policy.msgpack, or an "
+            "env id with a shipped expert) deterministically for the full horizon. Observations "
+            "are what a learner sees; actions and rewards are kept for analysis only."
+        ),
+    )
+    k.add_argument("--expert", required=True, help="expert directory or env id")
+    k.add_argument("--env", default=None, help="check that the expert is for this env")
+    k.add_argument(
+        "-n", "--episodes", type=int, default=10, help="episodes to collect (default 10)"
+    )
+    k.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
+    k.add_argument("--out", required=True, help="ilfo .npz to write")
+    k.add_argument(
+        "--keep-falls",
+        action="store_true",
+        help="keep episodes in which the expert falls (default: skip them, try the next seed)",
+    )
+    k.set_defaults(run=_run_demos_collect)
+
+
+def _run_demos_collect(args: argparse.Namespace) -> int:
+    from ilfo.experts import collect_demos, load_expert
+
+    expert = load_expert(args.expert)
+    if args.env and args.env != expert.config.env:
+        raise ValueError(f"the expert is for {expert.config.env}, not {args.env}")
+    episodes = collect_demos(
+        expert, args.episodes, args.out, first_seed=args.seed, skip_falls=not args.keep_falls
+    )
+    returns = np.array([e.task_score for e in episodes])
+    print(
+        f"wrote {args.out}: {len(episodes)} episodes of {len(episodes[0].observations) - 1} "
+        f"steps, return {returns.mean():.1f} +- {returns.std():.1f} (fixed-horizon score)"
+    )
+    return 0
+
+
+def _run_demos_info(args: argparse.Namespace) -> int:
+    summary = demos.summarize(demos.load_any(args.file))
+    if args.json:
+        print(json.dumps(summary))
+        return 0
+    print(f"{args.file} ({demos.detect_format(args.file)})")
+    rows = [
+        ("env id", summary["env_id"] or "(not recorded)"),
+        ("episodes", summary["episodes"]),
+        ("transitions", summary["transitions"]),
+        (
+            "length (T)",
+            f"min {summary['length_min']}  mean {summary['length_mean']:.1f}  "
+            f"max {summary['length_max']}",
+        ),
+        ("obs dim", summary["obs_dim"]),
+        ("action dim", "(no actions)" if summary["action_dim"] is None else summary["action_dim"]),
+    ]
+    if summary["return_mean"] is None:
+        rows.append(("return", "(no rewards)"))
+    else:
+        rows.append(
+            (
+                "return",
+                f"mean {summary['return_mean']:.2f}  std {summary['return_std']:.2f}  "
+                f"min {summary['return_min']:.2f}  max {summary['return_max']:.2f}",
+            )
+        )
+    rows.append(("provenance", json.dumps(summary["provenance"], sort_keys=True)))
+    for key, value in rows:
+        print(f"{key:>12s}: {value}")
+    return 0
+
+
+def _run_demos_convert(args: argparse.Namespace) -> int:
+    out = Path(args.output)
+    if out.suffix != ".npz":
+        raise ValueError(f"OUT must end in .npz, got {out}")
+    if out.exists() and not args.force:
+        raise ValueError(f"{out} exists: pass --force to overwrite it")
+    data = demos.load_any(args.input)
+    env_id = args.env_id or data.env_id
+    if not env_id:
+        raise ValueError(f"{args.input} does not record its environment: pass --env-id")
+    provenance = dict(data.provenance)
+    if args.env_id and data.env_id and data.env_id != args.env_id:
+        provenance["env_id_overridden_from"] = data.env_id
+    demos.save(out, data.episodes, env_id, provenance)
+    print(f"wrote {out}: {len(data.episodes)} episodes of {env_id}")
+    return 0

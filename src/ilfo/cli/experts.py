@@ -1,0 +1,175 @@
+"""``ilfo expert train | export | eval``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+from pathlib import Path
+
+from ilfo.cli._common import _command
+
+
+def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("expert", help="Train, export and evaluate SAC experts.")
+    esub = p.add_subparsers(dest="expert_command", required=True)
+    t = esub.add_parser(
+        "train",
+        help="SAC on the task reward, checkpointed and resumable in segments.",
+        description=(
+            "Train a SAC expert on the task reward in runs/experts/<ENV>__sac__<seed>/ (or "
+            "--run-dir). Standard episodes (termination handled), evaluated every --eval-every "
+            "steps on --eval-episodes deterministic episodes; the policy of the best standard "
+            "return (which stops at the first fall) is what `ilfo expert export` ships. Stop "
+            "any time (Ctrl-C checkpoints) and continue with --resume, possibly with a larger "
+            "--steps."
+        ),
+    )
+    t.add_argument("env", help="environment id, e.g. Hopper-v5")
+    t.add_argument("--steps", type=int, default=None, help="total steps (default 1,000,000)")
+    t.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    t.add_argument(
+        "--eval-every",
+        type=int,
+        default=10_000,
+        help="steps between evaluations (default 10,000; a resumed run keeps its own)",
+    )
+    t.add_argument(
+        "--eval-episodes",
+        type=int,
+        default=10,
+        help="episodes per evaluation (default 10; fewer for slow envs such as Minitaur)",
+    )
+    t.add_argument(
+        "--reward-scale",
+        type=float,
+        default=None,
+        help="SAC reward scale (default 16 for the Minitaur tasks, whose per-step rewards are "
+        "tiny, else 1; a resumed run keeps its own)",
+    )
+    t.add_argument(
+        "--healthy-angle-range",
+        type=float,
+        nargs=2,
+        metavar=("LOW", "HIGH"),
+        default=None,
+        help="train with a stricter torso angle range (radians; Hopper, Walker2d): the expert "
+        "learns to keep a margin from a fall; demos are still recorded in the standard env "
+        "(default: the env's own range; a resumed run keeps its own)",
+    )
+    t.add_argument("--resume", action="store_true", help="continue the existing run")
+    t.add_argument("--run-dir", default=None, help="run directory (default: see above)")
+    t.add_argument(
+        "--checkpoint-every",
+        type=int,
+        default=25_000,
+        help="steps between checkpoints (default 25,000)",
+    )
+    t.add_argument("--no-progress", action="store_true", help="no progress bar")
+    t.set_defaults(run=_run_expert_train)
+    x = esub.add_parser("export", help="Export a run's policy as the env's shipped expert.")
+    x.add_argument("run_dir", help="the expert's run directory")
+    x.add_argument("--out", default=None, help="expert directory (default data/experts/<env>)")
+    x.add_argument("-n", "--num-demos", type=int, default=10, help="demos to collect (default 10)")
+    x.add_argument(
+        "--which",
+        choices=["best", "latest"],
+        default="best",
+        help="the best-evaluated policy or the last checkpoint's",
+    )
+    x.add_argument(
+        "--keep-falls",
+        action="store_true",
+        help="keep demos in which the expert falls (default: skip them, try the next seed)",
+    )
+    x.add_argument(
+        "--note",
+        default=None,
+        help="a sentence for the card, e.g. why an expert short of the paper's is shipped",
+    )
+    x.set_defaults(run=_run_expert_export)
+    e = esub.add_parser("eval", help="Mean and std return of a shipped (or given) expert.")
+    e.add_argument("env", help="environment id with a shipped expert, or an expert directory")
+    e.add_argument(
+        "--episodes", type=int, default=10, help="episodes, seeds 1000, 1001, ... (default 10)"
+    )
+    e.add_argument("--json", action="store_true", help="one JSON line")
+    e.set_defaults(run=_run_expert_eval)
+
+
+def _run_expert_train(args: argparse.Namespace) -> int:
+    from ilfo.agents import SACConfig
+    from ilfo.experts import expert_reward_scale
+    from ilfo.training import TrainConfig, Trainer
+
+    run_dir = Path(args.run_dir or Path("runs") / "experts" / f"{args.env}__sac__{args.seed}")
+    if args.resume:
+        if args.reward_scale is not None:
+            raise ValueError("--reward-scale cannot change on --resume: the run keeps its own")
+        if args.healthy_angle_range is not None:
+            raise ValueError(
+                "--healthy-angle-range cannot change on --resume: the run keeps its own"
+            )
+        trainer = Trainer.resume(run_dir, progress=not args.no_progress, steps=args.steps)
+    else:
+        if (run_dir / "config.json").exists():
+            raise ValueError(f"{run_dir} exists: continue it with --resume, or pass --run-dir")
+        scale = expert_reward_scale(args.env) if args.reward_scale is None else args.reward_scale
+        config = TrainConfig(
+            env=args.env,
+            algo="sac",
+            sac=SACConfig(reward_scale=scale),
+            best_by="return",
+            healthy_angle_range=args.healthy_angle_range,  # a list: TrainConfig makes it a tuple
+            seed=args.seed,
+            steps=args.steps or 1_000_000,
+            eval_every=args.eval_every,
+            eval_episodes=args.eval_episodes,
+            checkpoint_every=args.checkpoint_every,
+        )
+        trainer = Trainer(config, run_dir, progress=not args.no_progress)
+    trainer.resume_command = (
+        f"{_command()} expert train {shlex.quote(args.env)} --resume --run-dir "
+        f"{shlex.quote(str(run_dir))}"
+    )
+    print(f"run directory: {run_dir}")
+    print(trainer.checkpoint_plan())
+    trainer.train()
+    print(f"done: {json.dumps(trainer.last_eval)}")
+    return 0
+
+
+def _run_expert_export(args: argparse.Namespace) -> int:
+    from ilfo.experts import export_expert_with_demos
+
+    out, card = export_expert_with_demos(
+        args.run_dir,
+        args.out,
+        args.which,
+        args.num_demos,
+        skip_falls=not args.keep_falls,
+        note=args.note,
+    )
+    skipped, fell = card["demo_seeds_skipped_for_a_fall"], card["demo_seeds_with_a_fall"]
+    print(
+        f"wrote {out}: return {card['return_mean']:.1f} +- {card['return_std']:.1f} over "
+        f"{card['num_demos']} demos after {card['steps_trained']} steps"
+        + (f"; skipped seeds {skipped}, where the expert fell" if skipped else "")
+        + (f"; kept demos with a fall (seeds {fell})" if fell else "")
+    )
+    return 0
+
+
+def _run_expert_eval(args: argparse.Namespace) -> int:
+    from ilfo.experts import evaluate_expert
+
+    if args.episodes < 1:
+        raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
+    result = evaluate_expert(args.env, args.episodes)
+    print(
+        json.dumps(result)
+        if args.json
+        else f"{result['env_id']}: return {result['return_mean']:.1f} +- {result['return_std']:.1f}"
+        f" (fixed-horizon score {result['score_mean']:.1f}) over {args.episodes} episodes"
+    )
+    return 0

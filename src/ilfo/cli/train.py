@@ -1,0 +1,167 @@
+"""``ilfo train``, ``ilfo eval`` and ``ilfo plot``."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import shlex
+from pathlib import Path
+
+from ilfo.cli._common import _command
+from ilfo.config import add_dataclass_arguments, flag_name, overrides_from_args
+
+
+def _add_train_parser(sub: argparse._SubParsersAction) -> None:
+    from ilfo.agents import TD3Config
+    from ilfo.algos import AGENT_PARTS, PART_CONFIGS, REWARD_PARTS, algos_using
+    from ilfo.training import TrainConfig
+
+    p = sub.add_parser(
+        "train",
+        help="Train a policy (default: OOPS+TD3 on Hopper-v5 from one shipped expert demo).",
+        description=(
+            "Train a policy from state-only demonstrations (or on the task reward for td3/sac). "
+            "Writes runs/<env>__<algo>__<seed>__<time>/ with config.json, metrics.csv, tb/ "
+            "(TensorBoard), checkpoints/, policy.msgpack (the final policy), best_policy.msgpack "
+            "and best_policy.json (the best-evaluated one) and learning_curve.png. Ctrl-C "
+            "checkpoints; --resume RUN_DIR continues exactly where the run stopped. Every "
+            "setting, the agent's and the rewarder's included, is recorded in config.json."
+        ),
+    )
+    add_dataclass_arguments(p, TrainConfig)
+    p.add_argument(
+        "--resume",
+        metavar="RUN_DIR",
+        default=None,
+        help="continue a run from its last checkpoint (--steps may extend it)",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    paper, fast = TD3Config.paper(), TD3Config.fast()
+    preset_defaults = {
+        f.name: _show(getattr(paper, f.name))
+        if getattr(paper, f.name) == getattr(fast, f.name)
+        else f"paper {_show(getattr(paper, f.name))}, fast {_show(getattr(fast, f.name))}"
+        for f in dataclasses.fields(TD3Config)
+    }
+    for name, part in {**AGENT_PARTS, **REWARD_PARTS}.items():
+        algos = ", ".join(algos_using(name))
+        title = f"{part.title} ({algos}{'; overrides the --preset' * (name == 'td3')})"
+        group = p.add_argument_group(title, part.description)
+        defaults = preset_defaults if name == "td3" else None
+        add_dataclass_arguments(
+            group, PART_CONFIGS[name], part.set_by_trainer, prefix=name, defaults=defaults
+        )
+    p.set_defaults(run=_run_train)
+
+
+def _show(value: object) -> str:
+    return " ".join(map(str, value)) if isinstance(value, tuple) else str(value)
+
+
+def _run_train(args: argparse.Namespace) -> int:
+    from ilfo.algos import PART_CONFIGS
+    from ilfo.training import TrainConfig, Trainer, create_run_dir, run_name
+
+    overrides = overrides_from_args(args, TrainConfig)
+    groups = {
+        name: overrides_from_args(args, cls, prefix=name) for name, cls in PART_CONFIGS.items()
+    }
+    groups = {name: given for name, given in groups.items() if given}
+    if args.resume:
+        extra = [flag_name(k) for k in overrides if k != "steps"]
+        extra += [flag_name(k, name) for name, given in groups.items() for k in given]
+        if extra:
+            raise ValueError(f"--resume takes its config from the run; drop {', '.join(extra)}")
+        trainer = Trainer.resume(
+            args.resume, progress=not args.no_progress, steps=overrides.get("steps")
+        )
+    else:
+        config = TrainConfig(**overrides)
+        # A group's flags change the preset's (or the default) config of that part; groups
+        # with no flag given stay None, i.e. the defaults.
+        config = dataclasses.replace(
+            config,
+            **{
+                name: dataclasses.replace(config.part_config(name), **given)
+                for name, given in groups.items()
+            },
+        )
+        run_dir = create_run_dir(config.out, run_name(config))  # new and empty, never shared
+        try:
+            trainer = Trainer(config, run_dir, progress=not args.no_progress)
+        except BaseException:
+            run_dir.rmdir()  # nothing was written: a failed start leaves no directory behind
+            raise
+    trainer.resume_command = f"{_command()} train --resume {shlex.quote(str(trainer.run_dir))}"
+    print(f"run directory: {trainer.run_dir}")
+    print(trainer.checkpoint_plan())
+    run_dir = trainer.train()
+    final = trainer.last_eval
+    print(f"done: {run_dir}  last evaluation: {json.dumps(final)}")
+    return 0
+
+
+def _add_eval_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "eval",
+        help="Evaluate a run's final policy (deterministic episodes).",
+        description=(
+            "Evaluate a run's final policy (policy.msgpack, or its last checkpoint's while the "
+            "run has not finished): the paper's fixed-horizon score and the standard return, "
+            "both normalised by the demos' return, and the OT distance to the first demo."
+        ),
+    )
+    p.add_argument("run_dir", help="a run directory written by `ilfo train`")
+    p.add_argument("--episodes", type=int, default=10, help="episodes to run (default 10)")
+    p.add_argument(
+        "--best", action="store_true", help="evaluate best_policy.msgpack instead of the final one"
+    )
+    p.add_argument(
+        "--video",
+        default=None,
+        metavar="OUT.mp4",
+        help="also record the first episode (needs MuJoCo offscreen rendering)",
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON line")
+    p.set_defaults(run=_run_eval)
+
+
+def _run_eval(args: argparse.Namespace) -> int:
+    from ilfo.evaluate import evaluate_run
+
+    result = evaluate_run(
+        Path(args.run_dir), episodes=args.episodes, video=args.video, best=args.best
+    )
+    if args.json:
+        print(json.dumps(result))
+    else:
+        for key, value in result.items():
+            print(f"{key:>20s}: {value}")
+    return 0
+
+
+def _add_plot_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("plot", help="Plot evaluation curves of runs (mean and spread over seeds).")
+    p.add_argument("run_dirs", nargs="+", help="run directories")
+    p.add_argument(
+        "--out", default="learning_curves.png", help="output image (default learning_curves.png)"
+    )
+    p.add_argument(
+        "--metric",
+        default=None,
+        help="a metrics.csv column (default: eval_score_norm, else eval_score)",
+    )
+    p.set_defaults(run=_run_plot)
+
+
+def _run_plot(args: argparse.Namespace) -> int:
+    from ilfo.training import plot_runs
+
+    dirs = [Path(d) for d in args.run_dirs]
+    for d in dirs:
+        if not (d / "metrics.csv").is_file() or not (d / "config.json").is_file():
+            raise FileNotFoundError(f"{d} is not a run directory (no metrics.csv/config.json)")
+    out = plot_runs(dirs, Path(args.out), args.metric)
+    print(f"wrote {out}")
+    return 0
