@@ -255,6 +255,48 @@ def _idm_steps(
     return state.replace(idm=idm_state, key=key), {"idm_loss": jnp.mean(mse)}
 
 
+def _init_state(parts: _Parts, setup: Any, obs_dim: int, action_dim: int, seed: int) -> OPOLOState:
+    key, k_actor, k_critic, k_idm, k_reward = jax.random.split(jax.random.PRNGKey(seed), 5)
+    actor_params = parts.actor.init(k_actor, jnp.zeros((1, obs_dim), jnp.float32))
+    critic_params = parts.critic.init(
+        k_critic, jnp.zeros((1, obs_dim), jnp.float32), jnp.zeros((1, action_dim), jnp.float32)
+    )
+    return OPOLOState(
+        actor_params=actor_params,
+        critic_params=critic_params,
+        critic_target=critic_params,
+        actor_opt_state=parts.opt.init(actor_params),
+        critic_opt_state=parts.opt.init(critic_params),
+        idm=parts.idm.init(k_idm),
+        reward=setup.reward.init(k_reward, setup.expert),
+        obs_mean=jnp.zeros(obs_dim, jnp.float32),
+        obs_std=jnp.ones(obs_dim, jnp.float32),
+        normalizer_set=jnp.array(False),
+        step=jnp.array(0, jnp.int32),
+        idm_pretrained=jnp.array(False),
+        key=key,
+    )
+
+
+def _agent_updates(
+    parts: _Parts, cfg: OPOLOConfig, setup: Any, state: OPOLOState, data: ReplayData, size: Any,
+    expert: Any, expert_agent_obs: jax.Array, num_updates: int,
+) -> tuple[OPOLOState, dict[str, jax.Array]]:  # fmt: skip
+    """``num_updates`` OPOLO updates in one ``lax.scan`` (the actor every ``policy_delay``)."""
+    step = functools.partial(_update_step, parts, cfg, setup, expert_agent_obs, expert)
+    state, outs = delayed_updates(
+        step, cfg.policy_delay, state.step, state, data, size, num_updates, cfg.batch_size
+    )
+    c_loss, a_loss, q_mean, did_actor, reward = outs
+    n_actor = jnp.maximum(jnp.sum(did_actor), 1)
+    return state, {
+        "critic_loss": jnp.mean(c_loss),
+        "actor_loss": jnp.sum(jnp.where(did_actor, a_loss, 0.0)) / n_actor,
+        "q_mean": jnp.mean(q_mean),
+        "reward_mean": jnp.mean(reward),
+    }
+
+
 def make_opolo(
     config: OPOLOConfig, obs_dim: int, action_dim: int, max_action: float | ArrayLike, setup: Any
 ) -> OPOLO:
@@ -281,28 +323,6 @@ def make_opolo(
         ),
     )
 
-    def init(seed: int) -> OPOLOState:
-        key, k_actor, k_critic, k_idm, k_reward = jax.random.split(jax.random.PRNGKey(seed), 5)
-        actor_params = parts.actor.init(k_actor, jnp.zeros((1, obs_dim), jnp.float32))
-        critic_params = parts.critic.init(
-            k_critic, jnp.zeros((1, obs_dim), jnp.float32), jnp.zeros((1, action_dim), jnp.float32)
-        )
-        return OPOLOState(
-            actor_params=actor_params,
-            critic_params=critic_params,
-            critic_target=critic_params,
-            actor_opt_state=parts.opt.init(actor_params),
-            critic_opt_state=parts.opt.init(critic_params),
-            idm=parts.idm.init(k_idm),
-            reward=setup.reward.init(k_reward, setup.expert),
-            obs_mean=jnp.zeros(obs_dim, jnp.float32),
-            obs_std=jnp.ones(obs_dim, jnp.float32),
-            normalizer_set=jnp.array(False),
-            step=jnp.array(0, jnp.int32),
-            idm_pretrained=jnp.array(False),
-            key=key,
-        )
-
     @jax.jit
     def act(state: OPOLOState | Policy, obs: jax.Array, key: jax.Array | None = None) -> jax.Array:
         action = parts.actor.apply(state.actor_params, _normalize(state, obs))
@@ -311,21 +331,9 @@ def make_opolo(
         noise = jax.random.normal(key, action.shape) * (cfg.exploration_noise * max_action)
         return jnp.clip(action + noise, -max_action, max_action)
 
-    def agent_updates(state, data, size, expert, expert_agent_obs, num_updates: int):
-        step = functools.partial(_update_step, parts, cfg, setup, expert_agent_obs, expert)
-        state, outs = delayed_updates(
-            step, cfg.policy_delay, state.step, state, data, size, num_updates, cfg.batch_size
-        )
-        c_loss, a_loss, q_mean, did_actor, reward = outs
-        n_actor = jnp.maximum(jnp.sum(did_actor), 1)
-        return state, {
-            "critic_loss": jnp.mean(c_loss),
-            "actor_loss": jnp.sum(jnp.where(did_actor, a_loss, 0.0)) / n_actor,
-            "q_mean": jnp.mean(q_mean),
-            "reward_mean": jnp.mean(reward),
-        }
-
-    agent_updates_jit = jax.jit(agent_updates, static_argnames="num_updates")
+    agent_updates_jit = jax.jit(
+        functools.partial(_agent_updates, parts, cfg, setup), static_argnames="num_updates"
+    )
     idm_steps_jit = jax.jit(
         functools.partial(_idm_steps, parts, cfg, tf), static_argnames="num_steps"
     )
@@ -363,7 +371,7 @@ def make_opolo(
         obs_dim=obs_dim,
         action_dim=action_dim,
         max_action=max_action,
-        init=init,
+        init=functools.partial(_init_state, parts, setup, obs_dim, action_dim),
         act=act,
         update=update,
         set_normalizer=make_normalizer_setter(obs_dim, tf),

@@ -14,6 +14,7 @@ Usage mirrors TD3::
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
@@ -164,6 +165,119 @@ def sac_metrics(outs: tuple[jax.Array, ...], state: SACState) -> dict[str, jax.A
     }
 
 
+class _Networks(NamedTuple):
+    """SAC's modules, optimisers and constants, built once from the config (static)."""
+
+    actor: SquashedGaussianActor
+    critic: CriticEnsemble
+    actor_opt: optax.GradientTransformation
+    critic_opt: optax.GradientTransformation
+    temperature_opt: optax.GradientTransformation
+    max_action: float
+    target_entropy: float
+
+
+def _normalize(state: SACState | Policy, obs: jax.Array) -> jax.Array:
+    return (obs - state.obs_mean) / state.obs_std
+
+
+def _policy(
+    nets: _Networks, params: Params, obs_n: jax.Array, key: jax.Array
+) -> tuple[jax.Array, jax.Array]:
+    mean, log_std = nets.actor.apply(params, obs_n)
+    return sample_squashed(key, mean, log_std, nets.max_action)
+
+
+def _init_state(
+    nets: _Networks, cfg: SACConfig, obs_dim: int, action_dim: int, seed: int
+) -> SACState:
+    key, k_actor, k_critic = jax.random.split(jax.random.PRNGKey(seed), 3)
+    obs = jnp.zeros((1, obs_dim), jnp.float32)
+    action = jnp.zeros((1, action_dim), jnp.float32)
+    actor_params = nets.actor.init(k_actor, obs)
+    critic_params = nets.critic.init(k_critic, obs, action)
+    log_temperature = jnp.log(jnp.asarray(cfg.init_temperature, jnp.float32))
+    return SACState(
+        actor_params=actor_params,
+        critic_params=critic_params,
+        critic_target=critic_params,
+        log_temperature=log_temperature,
+        actor_opt_state=nets.actor_opt.init(actor_params),
+        critic_opt_state=nets.critic_opt.init(critic_params),
+        temperature_opt_state=nets.temperature_opt.init(log_temperature),
+        obs_mean=jnp.zeros(obs_dim, jnp.float32),
+        obs_std=jnp.ones(obs_dim, jnp.float32),
+        normalizer_set=jnp.array(False),
+        step=jnp.array(0, jnp.int32),
+        key=key,
+    )
+
+
+def _update_step(
+    nets: _Networks, cfg: SACConfig, state: SACState, batch: ReplayData, key: jax.Array
+):
+    """One SAC update (critics, actor, temperature, targets) on one batch."""
+    k_next, k_pi = jax.random.split(key)
+    obs_n = _normalize(state, batch.obs)
+    next_obs_n = _normalize(state, batch.next_obs)
+    temperature = jnp.exp(state.log_temperature)
+
+    # Critic: soft TD target with the current policy at s'.
+    next_action, next_logp = _policy(nets, state.actor_params, next_obs_n, k_next)
+    next_q = jnp.min(nets.critic.apply(state.critic_target, next_obs_n, next_action), axis=0)
+    target = cfg.reward_scale * batch.reward + cfg.gamma * batch.not_done * (
+        next_q - temperature * next_logp
+    )
+    target = jax.lax.stop_gradient(target)
+
+    def critic_loss_fn(params: Params) -> tuple[jax.Array, jax.Array]:
+        q = nets.critic.apply(params, obs_n, batch.action)  # (num_critics, B)
+        return jnp.sum(jnp.mean((q - target) ** 2, axis=-1)), jnp.mean(q)
+
+    (c_loss, q_mean), grads = jax.value_and_grad(critic_loss_fn, has_aux=True)(state.critic_params)
+    updates, critic_opt_state = nets.critic_opt.update(
+        grads, state.critic_opt_state, state.critic_params
+    )
+    critic_params = optax.apply_updates(state.critic_params, updates)
+
+    # Actor: minimise alpha * log pi - min_i Q_i with the updated critics.
+    def actor_loss_fn(params: Params) -> tuple[jax.Array, jax.Array]:
+        action, logp = _policy(nets, params, obs_n, k_pi)
+        q = jnp.min(nets.critic.apply(critic_params, obs_n, action), axis=0)
+        return jnp.mean(temperature * logp - q), logp
+
+    (a_loss, logp), a_grads = jax.value_and_grad(actor_loss_fn, has_aux=True)(state.actor_params)
+    a_updates, actor_opt_state = nets.actor_opt.update(
+        a_grads, state.actor_opt_state, state.actor_params
+    )
+    actor_params = optax.apply_updates(state.actor_params, a_updates)
+
+    # Temperature: J(log alpha) = E[-log alpha * (log pi + nets.target_entropy)].
+    entropy = -jnp.mean(logp)
+    log_temperature = state.log_temperature
+    temperature_opt_state = state.temperature_opt_state
+    if cfg.autotune:
+        gap = jax.lax.stop_gradient(jnp.mean(logp) + nets.target_entropy)
+        t_grad = -gap  # d/d(log alpha) of -log alpha * gap
+        t_updates, temperature_opt_state = nets.temperature_opt.update(
+            t_grad, state.temperature_opt_state, log_temperature
+        )
+        log_temperature = optax.apply_updates(log_temperature, t_updates)
+
+    critic_target = optax.incremental_update(critic_params, state.critic_target, cfg.tau)
+    new_state = state.replace(
+        actor_params=actor_params,
+        critic_params=critic_params,
+        critic_target=critic_target,
+        log_temperature=log_temperature,
+        actor_opt_state=actor_opt_state,
+        critic_opt_state=critic_opt_state,
+        temperature_opt_state=temperature_opt_state,
+        step=state.step + 1,
+    )
+    return new_state, (c_loss, a_loss, q_mean, entropy)
+
+
 def make_sac(
     config: SACConfig, obs_dim: int, action_dim: int, max_action: float | ArrayLike = 1.0
 ) -> SAC:
@@ -178,117 +292,27 @@ def make_sac(
     """
     cfg = config
     max_action = as_float_bound(max_action)
-    target_entropy = -float(action_dim) if cfg.target_entropy is None else cfg.target_entropy
-    actor = SquashedGaussianActor(cfg.actor_hidden, action_dim, cfg.log_std_min, cfg.log_std_max)
-    critic = CriticEnsemble(cfg.critic_hidden, cfg.num_critics)
-    actor_opt = optax.adam(cfg.lr_actor)
-    critic_opt = make_optimizer(cfg.lr_critic, cfg.critic_grad_clip)
-    temperature_opt = optax.adam(cfg.lr_temperature)
-
-    def init(seed: int) -> SACState:
-        key, k_actor, k_critic = jax.random.split(jax.random.PRNGKey(seed), 3)
-        obs = jnp.zeros((1, obs_dim), jnp.float32)
-        action = jnp.zeros((1, action_dim), jnp.float32)
-        actor_params = actor.init(k_actor, obs)
-        critic_params = critic.init(k_critic, obs, action)
-        log_temperature = jnp.log(jnp.asarray(cfg.init_temperature, jnp.float32))
-        return SACState(
-            actor_params=actor_params,
-            critic_params=critic_params,
-            critic_target=critic_params,
-            log_temperature=log_temperature,
-            actor_opt_state=actor_opt.init(actor_params),
-            critic_opt_state=critic_opt.init(critic_params),
-            temperature_opt_state=temperature_opt.init(log_temperature),
-            obs_mean=jnp.zeros(obs_dim, jnp.float32),
-            obs_std=jnp.ones(obs_dim, jnp.float32),
-            normalizer_set=jnp.array(False),
-            step=jnp.array(0, jnp.int32),
-            key=key,
-        )
-
-    def normalize(state: SACState | Policy, obs: jax.Array) -> jax.Array:
-        return (obs - state.obs_mean) / state.obs_std
-
-    def policy(params: Params, obs_n: jax.Array, key: jax.Array) -> tuple[jax.Array, jax.Array]:
-        mean, log_std = actor.apply(params, obs_n)
-        return sample_squashed(key, mean, log_std, max_action)
+    nets = _Networks(
+        actor=SquashedGaussianActor(cfg.actor_hidden, action_dim, cfg.log_std_min, cfg.log_std_max),
+        critic=CriticEnsemble(cfg.critic_hidden, cfg.num_critics),
+        actor_opt=optax.adam(cfg.lr_actor),
+        critic_opt=make_optimizer(cfg.lr_critic, cfg.critic_grad_clip),
+        temperature_opt=optax.adam(cfg.lr_temperature),
+        max_action=max_action,
+        target_entropy=-float(action_dim) if cfg.target_entropy is None else cfg.target_entropy,
+    )
+    update_step = functools.partial(_update_step, nets, cfg)
 
     @jax.jit
     def act(state: SACState | Policy, obs: jax.Array, key: jax.Array | None = None) -> jax.Array:
-        mean, log_std = actor.apply(state.actor_params, normalize(state, obs))
+        mean, log_std = nets.actor.apply(state.actor_params, _normalize(state, obs))
         if key is None:
             return deterministic_squashed(mean, max_action)
         return sample_squashed(key, mean, log_std, max_action)[0]
 
     @jax.jit
     def q_values(state: SACState, obs: jax.Array, action: jax.Array) -> jax.Array:
-        return critic.apply(state.critic_params, normalize(state, obs), action)
-
-    def update_step(state: SACState, batch: ReplayData, key: jax.Array):
-        k_next, k_pi = jax.random.split(key)
-        obs_n = normalize(state, batch.obs)
-        next_obs_n = normalize(state, batch.next_obs)
-        temperature = jnp.exp(state.log_temperature)
-
-        # Critic: soft TD target with the current policy at s'.
-        next_action, next_logp = policy(state.actor_params, next_obs_n, k_next)
-        next_q = jnp.min(critic.apply(state.critic_target, next_obs_n, next_action), axis=0)
-        target = cfg.reward_scale * batch.reward + cfg.gamma * batch.not_done * (
-            next_q - temperature * next_logp
-        )
-        target = jax.lax.stop_gradient(target)
-
-        def critic_loss_fn(params: Params) -> tuple[jax.Array, jax.Array]:
-            q = critic.apply(params, obs_n, batch.action)  # (num_critics, B)
-            return jnp.sum(jnp.mean((q - target) ** 2, axis=-1)), jnp.mean(q)
-
-        (c_loss, q_mean), grads = jax.value_and_grad(critic_loss_fn, has_aux=True)(
-            state.critic_params
-        )
-        updates, critic_opt_state = critic_opt.update(
-            grads, state.critic_opt_state, state.critic_params
-        )
-        critic_params = optax.apply_updates(state.critic_params, updates)
-
-        # Actor: minimise alpha * log pi - min_i Q_i with the updated critics.
-        def actor_loss_fn(params: Params) -> tuple[jax.Array, jax.Array]:
-            action, logp = policy(params, obs_n, k_pi)
-            q = jnp.min(critic.apply(critic_params, obs_n, action), axis=0)
-            return jnp.mean(temperature * logp - q), logp
-
-        (a_loss, logp), a_grads = jax.value_and_grad(actor_loss_fn, has_aux=True)(
-            state.actor_params
-        )
-        a_updates, actor_opt_state = actor_opt.update(
-            a_grads, state.actor_opt_state, state.actor_params
-        )
-        actor_params = optax.apply_updates(state.actor_params, a_updates)
-
-        # Temperature: J(log alpha) = E[-log alpha * (log pi + target_entropy)].
-        entropy = -jnp.mean(logp)
-        log_temperature = state.log_temperature
-        temperature_opt_state = state.temperature_opt_state
-        if cfg.autotune:
-            gap = jax.lax.stop_gradient(jnp.mean(logp) + target_entropy)
-            t_grad = -gap  # d/d(log alpha) of -log alpha * gap
-            t_updates, temperature_opt_state = temperature_opt.update(
-                t_grad, state.temperature_opt_state, log_temperature
-            )
-            log_temperature = optax.apply_updates(log_temperature, t_updates)
-
-        critic_target = optax.incremental_update(critic_params, state.critic_target, cfg.tau)
-        new_state = state.replace(
-            actor_params=actor_params,
-            critic_params=critic_params,
-            critic_target=critic_target,
-            log_temperature=log_temperature,
-            actor_opt_state=actor_opt_state,
-            critic_opt_state=critic_opt_state,
-            temperature_opt_state=temperature_opt_state,
-            step=state.step + 1,
-        )
-        return new_state, (c_loss, a_loss, q_mean, entropy)
+        return nets.critic.apply(state.critic_params, _normalize(state, obs), action)
 
     def update(
         state: SACState, data: ReplayData, size: jax.Array | int, num_updates: int
@@ -312,7 +336,7 @@ def make_sac(
         obs_dim=obs_dim,
         action_dim=action_dim,
         max_action=max_action,
-        init=init,
+        init=functools.partial(_init_state, nets, cfg, obs_dim, action_dim),
         act=act,
         update=jax.jit(update, static_argnames="num_updates"),
         set_normalizer=make_normalizer_setter(obs_dim, time_feature=False),
