@@ -113,6 +113,7 @@ def test_gaifo_td3_defaults_to_the_authors_td3_and_flags_reach_config_json(tmp_p
     assert config["td3"]["actor_hidden"] == [400, 300]  # the DACfO authors', not the preset's
     assert config["td3"]["init_scheme"] == "glorot"
     assert config["oops"] is None
+    assert main(["eval", str(run), "--episodes", "1", "--json"]) == 0  # the policy reads back
 
 
 def test_too_few_demo_transitions_for_a_batch_is_a_clear_error(tmp_path):

@@ -14,7 +14,7 @@ from ilfo.agents.inverse_dynamics import (
 from ilfo.agents.opolo import OPOLOConfig, make_opolo
 from ilfo.replay import ReplayData
 from ilfo.rewards import Discriminator, DiscriminatorConfig, expert_transitions
-from ilfo.training import Trainer
+from ilfo.training import Trainer, load_run_policy
 from ilfo.training.learned import LearnedRewardSetup, RewardSchedule
 from test_train import _metrics, _train
 
@@ -127,6 +127,8 @@ def test_opolo_trains_deterministically_and_resume_equals_uninterrupted(tmp_path
     assert full == _metrics(_train(tmp_path, "again", **OPOLO))
     assert any(r["reward_loss"] for r in full) and any(r["critic_loss"] for r in full)
     run = _train(tmp_path, "resumed", **{**OPOLO, "steps": 300})
+    latest = load_run_policy(run, "latest")  # a checkpoint of the whole state reads back
+    assert latest.checkpoint is not None and latest.checkpoint.step == 300
     trainer = Trainer.resume(run, progress=False, steps=600)
     assert _metrics(trainer.train()) == full
 

@@ -152,7 +152,9 @@ def make_agent(config: TrainConfig, env: EnvInfo, demos: Sequence[np.ndarray] | 
     schedule = reward_part.schedule(reward_config)
     rollouts = None if reward_part.rollouts is None else reward_part.rollouts(reward_config)
     if demos is None:  # a template: the shapes matter, not the values
-        demos = [np.zeros((env.horizon + 1, env.obs_dim), np.float32)] * reward.batch_size
+        demos = [np.zeros((env.horizon + 1, env.obs_dim), np.float32)] * max(
+            1, -(-reward.batch_size // env.horizon)
+        )
     setup = LearnedRewardSetup(
         reward=reward,
         schedule=schedule,
