@@ -265,7 +265,8 @@ class Trainer:
                 self.state, metrics = self.agent.functions.learn_from_rollouts(
                     self.state, trajectories
                 )
-            row.update({k: round(float(v), 5) for k, v in metrics.items() if k in _LOGGED})
+                # Reading the metrics waits for the jitted learning: timed as "reward".
+                row.update({k: round(float(v), 5) for k, v in metrics.items() if k in _LOGGED})
         if self.step // cfg.eval_every > (self.step - num_steps) // cfg.eval_every:
             with self.hooks.timed("evaluate"):
                 self.last_eval = self.evaluate()
