@@ -43,7 +43,7 @@ from ilfo.agents.inverse_dynamics import (
     InverseDynamicsState,
 )
 from ilfo.agents.networks import CriticEnsemble, DeterministicActor, InitName
-from ilfo.agents.td3 import delayed_updates
+from ilfo.agents.td3 import delayed, delayed_updates
 from ilfo.replay import ReplayData, sample_batch
 
 __all__ = ["OPOLO", "OPOLOConfig", "OPOLOState", "make_opolo"]
@@ -221,12 +221,7 @@ def _update_step(
         zero = jnp.zeros((), jnp.float32)
         return state.actor_params, state.actor_opt_state, state.critic_target, zero
 
-    if train_actor is None:
-        do_actor = (state.step + 1) % cfg.policy_delay == 0
-        outs = jax.lax.cond(do_actor, actor_step, skip, None)
-    else:
-        do_actor = jnp.array(train_actor)
-        outs = actor_step(None) if train_actor else skip(None)
+    do_actor, outs = delayed(train_actor, state.step, cfg.policy_delay, actor_step, skip)
     actor_params, actor_opt_state, critic_target, a_loss = outs
     new_state = state.replace(
         actor_params=actor_params,

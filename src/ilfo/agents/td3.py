@@ -48,6 +48,7 @@ __all__ = [
     "augment_time",
     "critic_loss",
     "ddpg_config",
+    "delayed",
     "delayed_updates",
     "make_td3",
     "pal_loss",
@@ -448,12 +449,7 @@ def _update_step(
         kept = (state.actor_params, state.actor_opt_state, state.actor_target, state.critic_target)
         return (*kept, jnp.zeros((), jnp.float32))
 
-    if train_actor is None:
-        do_actor = (state.step + 1) % cfg.policy_delay == 0
-        outs = jax.lax.cond(do_actor, actor_step, skip, None)
-    else:
-        do_actor = jnp.array(train_actor)
-        outs = actor_step(None) if train_actor else skip(None)
+    do_actor, outs = delayed(train_actor, state.step, cfg.policy_delay, actor_step, skip)
     actor_params, actor_opt_state, actor_target, critic_target, a_loss = outs
     new_state = state.replace(
         actor_params=actor_params,
@@ -465,6 +461,23 @@ def _update_step(
         step=state.step + 1,
     )
     return new_state, (c_loss, a_loss, q_mean, do_actor)
+
+
+def delayed(
+    train_actor: bool | None,
+    updates_done: jax.Array,
+    policy_delay: int,
+    actor_step: Callable[[None], Any],
+    skip: Callable[[None], Any],
+) -> tuple[jax.Array, Any]:
+    """The actor's part of one update: ``actor_step(None)`` on update numbers policy_delay,
+    2 * policy_delay, ... (``updates_done`` before this one), else ``skip(None)`` (the same
+    outputs, unchanged). ``train_actor`` True / False fixes the choice statically (no ``cond``);
+    None decides at run time. Returns (whether the actor was trained, the outputs)."""
+    if train_actor is None:
+        do_actor = (updates_done + 1) % policy_delay == 0
+        return do_actor, jax.lax.cond(do_actor, actor_step, skip, None)
+    return jnp.array(train_actor), actor_step(None) if train_actor else skip(None)
 
 
 def delayed_updates(
