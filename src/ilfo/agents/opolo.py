@@ -45,6 +45,7 @@ from ilfo.agents.inverse_dynamics import (
 from ilfo.agents.networks import CriticEnsemble, DeterministicActor, InitName
 from ilfo.agents.td3 import delayed, delayed_updates
 from ilfo.replay import ReplayData, sample_batch
+from ilfo.rewards.learned import RewardSchedule, env_observations, reward_steps
 
 __all__ = ["OPOLO", "OPOLOConfig", "OPOLOState", "make_opolo"]
 
@@ -158,10 +159,6 @@ def _normalize(state: OPOLOState | Policy, obs: jax.Array) -> jax.Array:
     return (obs - state.obs_mean) / state.obs_std
 
 
-def _env_obs(obs: jax.Array, time_feature: bool) -> jax.Array:
-    return obs[..., :-1] if time_feature else obs
-
-
 def _update_step(
     parts: _Parts,
     cfg: OPOLOConfig,
@@ -178,7 +175,7 @@ def _update_step(
     tf = setup.time_feature
     idx = jax.random.randint(key, (cfg.batch_size,), 0, expert.obs.shape[0])
     reward = setup.reward.reward(
-        state.reward, _env_obs(batch.obs, tf), _env_obs(batch.next_obs, tf)
+        state.reward, env_observations(batch.obs, tf), env_observations(batch.next_obs, tf)
     )
     obs_n, next_obs_n = _normalize(state, batch.obs), _normalize(state, batch.next_obs)
     next_q = jnp.min(
@@ -242,7 +239,10 @@ def _idm_steps(
 
     def body(idm_state: InverseDynamicsState, key: jax.Array):
         batch = sample_batch(data, size, key, cfg.batch_size)
-        obs, next_obs = _env_obs(batch.obs, time_feature), _env_obs(batch.next_obs, time_feature)
+        obs, next_obs = (
+            env_observations(batch.obs, time_feature),
+            env_observations(batch.next_obs, time_feature),
+        )
         return parts.idm.update(idm_state, obs, batch.action, next_obs)
 
     key, k_steps = jax.random.split(state.key)
@@ -304,8 +304,6 @@ def make_opolo(
         setup: the learned reward and expert data (``ilfo.training.learned.LearnedRewardSetup``);
             the reward is OPOLO's discriminator.
     """
-    from ilfo.training.learned import reward_steps
-
     cfg, tf = config, setup.time_feature
     max_action = as_float_bound(max_action)
     env_dim = obs_dim - int(tf)
@@ -332,6 +330,7 @@ def make_opolo(
     idm_steps_jit = jax.jit(
         functools.partial(_idm_steps, parts, cfg, tf), static_argnames="num_steps"
     )
+    idm_schedule = RewardSchedule(cfg.idm_every, cfg.idm_steps)
     reward_steps_jit = jax.jit(
         functools.partial(reward_steps, setup.reward, tf), static_argnames="num_steps"
     )
@@ -348,7 +347,7 @@ def make_opolo(
         if due:
             state, reward_metrics = reward_steps_jit(state, data, size, setup.expert, num_steps=due)
             metrics.update(reward_metrics)
-        idm_due = cfg.idm_steps * ((done + num_updates) // cfg.idm_every - done // cfg.idm_every)
+        idm_due = idm_schedule.steps_due(done, num_updates)
         if idm_due:
             state, idm_metrics = idm_steps_jit(state, data, size, num_steps=idm_due)
             metrics.update(idm_metrics)

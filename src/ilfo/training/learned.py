@@ -22,21 +22,14 @@ from numpy.typing import ArrayLike
 
 from ilfo.agents.sac import SAC
 from ilfo.agents.td3 import TD3
-from ilfo.replay import ReplayData, sample_batch
-from ilfo.rewards.learned import LearnedReward, Transitions, sample_transitions
-
-
-class RewardSchedule(NamedTuple):
-    """When the reward learns: ``steps`` gradient steps each time the agent's update count
-    crosses a multiple of ``every`` (taken before the agent's updates of that call)."""
-
-    every: int
-    steps: int
-
-    def steps_due(self, updates_done: int, num_updates: int) -> int:
-        """Reward steps due before agent updates updates_done + 1 ... + num_updates."""
-        crossed = (updates_done + num_updates) // self.every - updates_done // self.every
-        return self.steps * crossed
+from ilfo.replay import ReplayData
+from ilfo.rewards.learned import (
+    LearnedReward,
+    RewardSchedule,
+    Transitions,
+    env_observations,
+    reward_steps,
+)
 
 
 class RolloutPlan(NamedTuple):
@@ -100,41 +93,6 @@ class LearnedRewardAgent(NamedTuple):
     )
     """learn_from_rollouts(state, trajectories (n, T, obs_dim)) -> (state, metrics): the
     reward's learning from the policy's episodes (their states s_1..s_T) and the expert's."""
-
-
-def env_observations(obs: jax.Array, time_feature: bool) -> jax.Array:
-    """The environment's part of agent observations: the time feature, where the run appends
-    one, dropped (a reward of states must not see the clock)."""
-    return obs[..., :-1] if time_feature else obs
-
-
-def reward_steps(
-    reward: LearnedReward,
-    time_feature: bool,
-    state: LearnedRewardState,
-    data: ReplayData,
-    size: jax.Array | int,
-    expert: Transitions,
-    num_steps: int,
-) -> tuple[LearnedRewardState, dict[str, jax.Array]]:
-    """``num_steps`` gradient steps of the reward, each on uniform draws of ``reward.batch_size``
-    replay transitions and as many expert ones; metrics averaged over the steps. ``state`` is
-    any pytree with fields ``reward`` (the reward's state) and ``key``."""
-
-    def body(reward_state: Any, key: jax.Array):
-        k_learner, k_expert, k_step = jax.random.split(key, 3)
-        batch = sample_batch(data, size, k_learner, reward.batch_size)
-        learner = Transitions(
-            env_observations(batch.obs, time_feature),
-            env_observations(batch.next_obs, time_feature),
-        )
-        expert_batch = sample_transitions(expert, k_expert, reward.batch_size)
-        return reward.update(reward_state, learner, expert_batch, k_step)
-
-    key, k_steps = jax.random.split(state.key)
-    reward_state, metrics = jax.lax.scan(body, state.reward, jax.random.split(k_steps, num_steps))
-    state = state.replace(reward=reward_state, key=key)
-    return state, jax.tree.map(jnp.mean, metrics)
 
 
 class LearnedRewardSetup(NamedTuple):
