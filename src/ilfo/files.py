@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import tomllib
 import zipfile
 from pathlib import Path
 from typing import Any, TypeVar
@@ -70,3 +71,24 @@ def load_npz(path: str | Path, what: str) -> dict[str, np.ndarray]:
         raise ValueError(f"{path} is not a readable {what} file ({err})") from None
     except (zipfile.BadZipFile, OSError, EOFError, KeyError) as err:
         raise ValueError(f"{path} is not a readable {what} file ({err}); truncated?") from None
+
+
+def read_settings_file(path: str | Path) -> dict[str, Any]:
+    """A JSON (or TOML, by its suffix) file of settings, as a dict; clear errors for a missing,
+    damaged or non-object file."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such settings file")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        raise ValueError(f"{path} is not UTF-8 text ({err.reason} at byte {err.start})") from None
+    try:
+        raw = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
+    except (json.JSONDecodeError, tomllib.TOMLDecodeError) as err:
+        raise ValueError(
+            f"{path} is not valid {path.suffix.lstrip('.').upper() or 'JSON'} ({err})"
+        ) from None
+    if not isinstance(raw, dict):
+        raise ValueError(f"{path} must hold an object of settings, not {type(raw).__name__}")
+    return raw

@@ -12,6 +12,7 @@ from typing import TextIO
 
 from ilfo.cli._common import _command as _command  # re-exported: ilfo.cli._command
 from ilfo.cli.data import _add_demos_parser, _add_reward_parser
+from ilfo.cli.experiments import _add_sweep_parser
 from ilfo.cli.experts import _add_expert_parser
 from ilfo.cli.train import _add_eval_parser, _add_plot_parser, _add_train_parser
 from ilfo.compilation_cache import enable_compilation_cache
@@ -35,7 +36,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     _add_expert_parser(sub)
     _add_reward_parser(sub)
     _add_demos_parser(sub)
-    args = parser.parse_args(argv)
+    _add_sweep_parser(sub)
+    args, rest = parser.parse_known_args(argv)
+    if rest and not getattr(args, "takes_train_flags", False):
+        parser.error(f"unrecognized arguments: {' '.join(rest)}")
+    args.rest = rest  # `ilfo sweep run`: the `ilfo train` flags of every run
     try:
         with warnings.catch_warnings():  # restores the default display on the way out
             warnings.showwarning = _show_warning

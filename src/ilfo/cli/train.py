@@ -7,9 +7,13 @@ import dataclasses
 import json
 import shlex
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from ilfo.cli._common import _command
 from ilfo.config import add_dataclass_arguments, flag_name, overrides_from_args
+
+if TYPE_CHECKING:
+    from ilfo.training import TrainConfig
 
 
 def _add_train_parser(sub: argparse._SubParsersAction) -> None:
@@ -36,6 +40,14 @@ def _add_train_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="continue a run from its last checkpoint (--steps may extend it)",
     )
+    p.add_argument(
+        "--config",
+        metavar="FILE.json",
+        default=None,
+        help="start from the settings of this file (a run's config.json, or a hand-written "
+        'subset: a part\'s dict, e.g. {"td3": {"batch_size": 256}}, changes single fields '
+        "of its default); flags override it",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     paper, fast = TD3Config.paper(), TD3Config.fast()
     preset_defaults = {
@@ -59,6 +71,25 @@ def _show(value: object) -> str:
     return " ".join(map(str, value)) if isinstance(value, tuple) else str(value)
 
 
+def config_from_args(
+    config_file: str | None, overrides: dict[str, Any], groups: dict[str, dict[str, Any]]
+) -> TrainConfig:
+    """The run's config: the settings of ``config_file`` (if any), changed by the flags given
+    (``overrides``: TrainConfig fields; ``groups``: single fields of a part, by part name)."""
+    from ilfo.files import read_settings_file
+    from ilfo.training import config_from_settings
+
+    settings: dict[str, Any] = {}
+    source = "the command line"
+    if config_file is not None:
+        settings = read_settings_file(config_file)
+        source = f"{config_file} and the command line"
+    settings = {**settings, **overrides}
+    for name, given in groups.items():
+        settings[name] = {**(settings.get(name) or {}), **given}
+    return config_from_settings(settings, source)
+
+
 def _run_train(args: argparse.Namespace) -> int:
     from ilfo.algos import PART_CONFIGS
     from ilfo.training import TrainConfig, Trainer, create_run_dir, run_name
@@ -71,22 +102,14 @@ def _run_train(args: argparse.Namespace) -> int:
     if args.resume:
         extra = [flag_name(k) for k in overrides if k != "steps"]
         extra += [flag_name(k, name) for name, given in groups.items() for k in given]
+        extra += ["--config"] * (args.config is not None)
         if extra:
             raise ValueError(f"--resume takes its config from the run; drop {', '.join(extra)}")
         trainer = Trainer.resume(
             args.resume, progress=not args.no_progress, steps=overrides.get("steps")
         )
     else:
-        config = TrainConfig(**overrides)
-        # A group's flags change the preset's (or the default) config of that part; groups
-        # with no flag given stay None, i.e. the defaults.
-        config = dataclasses.replace(
-            config,
-            **{
-                name: dataclasses.replace(config.part_config(name), **given)
-                for name, given in groups.items()
-            },
-        )
+        config = config_from_args(args.config, overrides, groups)
         run_dir = create_run_dir(config.out, run_name(config))  # new and empty, never shared
         try:
             trainer = Trainer(config, run_dir, progress=not args.no_progress)

@@ -28,7 +28,7 @@ from ilfo.training.build import (
     run_name,
 )
 from ilfo.training.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
-from ilfo.training.config import Algo, TrainConfig, config_from_dict
+from ilfo.training.config import Algo, TrainConfig, config_from_dict, config_from_settings
 from ilfo.training.loop import LoopHooks, Trainer
 from ilfo.training.metrics import METRIC_FIELDS, read_metrics
 from ilfo.training.plots import plot_runs
@@ -75,6 +75,7 @@ __all__ = [
     "agent_observation",
     "agent_observations",
     "config_from_dict",
+    "config_from_settings",
     "create_run_dir",
     "default_demos_path",
     "env_info",

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -215,5 +216,33 @@ def config_from_dict(raw: dict[str, Any], source: str | Path) -> TrainConfig:
         )
     try:
         return TrainConfig(**raw)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{source}: {err}") from None
+
+
+def config_from_settings(settings: Mapping[str, Any], source: str | Path) -> TrainConfig:
+    """A ``TrainConfig`` from settings as a file or a sweep spec gives them: top-level fields,
+    and for a part (``td3``, ``oops``, ...) a dict that changes single fields of the part's
+    default for this run (the recipe's for the env, else the preset's), as the ``--td3-*``
+    flags do; a whole part (a run's own config.json) reads back unchanged. A ValueError names
+    ``source`` and the setting at fault."""
+    parts = {k: v for k, v in settings.items() if k in PART_CONFIGS and isinstance(v, Mapping)}
+    config = config_from_dict({k: v for k, v in settings.items() if k not in parts}, source)
+    changed = {}
+    for name, given in parts.items():
+        known = {f.name for f in dataclasses.fields(PART_CONFIGS[name])}
+        unknown = sorted(set(given) - known)
+        if unknown:
+            raise ValueError(
+                f"{source}: {name} has no setting(s) {', '.join(map(repr, unknown))}; "
+                f"known: {', '.join(sorted(known))}"
+            )
+        values = {k: tuple(v) if isinstance(v, list) else v for k, v in given.items()}
+        try:
+            changed[name] = dataclasses.replace(config.part_config(name), **values)
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"{source}: {name}: {err}") from None
+    try:
+        return dataclasses.replace(config, **changed)
     except (TypeError, ValueError) as err:
         raise ValueError(f"{source}: {err}") from None

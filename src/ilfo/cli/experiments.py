@@ -1,0 +1,234 @@
+"""``ilfo sweep run | status``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from ilfo.config import overrides_from_args
+
+
+def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "sweep",
+        help="Run many runs (env x algo x demos x seed), resumable; or show a sweep's status.",
+        description="A sweep directory holds a manifest of runs and each run's directory; "
+        "`ilfo sweep run` trains the unfinished ones and can be stopped and started again at "
+        "any point without losing work.",
+    )
+    actions = p.add_subparsers(dest="sweep_command", required=True)
+    run = actions.add_parser(
+        "run",
+        allow_abbrev=False,  # --seed is an `ilfo train` flag, not short for --seeds
+        help="Create a sweep (from --spec or the axis flags) or continue one, and run it.",
+        description=(
+            "Run a sweep: every combination of --env, --algo, --num-demos and --seeds (or a "
+            "--spec file's axes and named variants), each an `ilfo train` run with the "
+            "settings given by any further `ilfo train` flag (e.g. --steps 1000000 --preset "
+            "fast --td3-batch-size 256; a part's flags apply to the algos that use that part). "
+            "Finished runs are skipped, interrupted ones resume from their checkpoints, failed "
+            "ones are retried up to --retries times. With a DIR that holds a sweep and no axes, "
+            "continues it. Ctrl-C checkpoints every run and stops."
+        ),
+        epilog='Spec file (JSON or TOML): {"env": [...], "algo": [...], "num_demos": '
+        '[1, 4, 10], "seed": "0-4", "config": {"steps": 1000000, "preset": "fast"}, '
+        '"variants": {"lambda0.1": {"oops": {"reg": 0.1}}}, "retries": 2}; config may '
+        "name a settings file (a run's config.json).",
+    )
+    run.add_argument("dir", help="the sweep directory (created if missing)")
+    run.add_argument("--spec", default=None, metavar="FILE", help="a sweep spec file")
+    run.add_argument("--env", nargs="+", default=None, help="environment ids")
+    run.add_argument("--algo", nargs="+", default=None, help="algorithms")
+    run.add_argument("--num-demos", nargs="+", type=int, default=None, help="demo counts")
+    run.add_argument("--seeds", nargs="+", default=None, help="seeds, or ranges such as 0-4")
+    run.add_argument(
+        "--retries", type=int, default=None, help="restarts of a run that failed (default 2)"
+    )
+    run.add_argument(
+        "--retry-failed",
+        action="store_true",
+        help="forget the failures of runs that were given up, so that they run again",
+    )
+    run.add_argument("--backend", choices=["local", "ray"], default="local")
+    run.add_argument(
+        "--cores-per-run",
+        type=int,
+        default=1,
+        help="CPUs (and BLAS/XLA threads) of each run (default 1: one run per core)",
+    )
+    run.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="local backend: runs at once (default: cores / --cores-per-run)",
+    )
+    run.add_argument(
+        "--address",
+        default=None,
+        help="Ray backend: the cluster ('auto' or HOST:PORT); default: a local Ray instance",
+    )
+    run.add_argument("--dry-run", action="store_true", help="list the runs and stop")
+    run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.set_defaults(run=_run_sweep, takes_train_flags=True)
+    status = actions.add_parser("status", help="Show each run's state and the sweep's progress.")
+    status.add_argument("dir", help="a sweep directory")
+    status.add_argument("--json", action="store_true", help="one JSON object per run")
+    status.set_defaults(run=_run_sweep_status)
+
+
+def _train_settings(rest: list[str]) -> dict[str, Any]:
+    """The `ilfo train` flags among a sweep's arguments, as sweep-config settings."""
+    from ilfo.algos import PART_CONFIGS
+    from ilfo.cli.train import _add_train_parser
+    from ilfo.files import read_settings_file
+    from ilfo.training import TrainConfig
+
+    parser = argparse.ArgumentParser(prog="ilfo sweep run DIR [ilfo train flags]")
+    _add_train_parser(parser.add_subparsers())
+    args = parser.parse_args(["train", *rest])
+    if args.resume is not None:
+        raise ValueError("ilfo sweep run resumes its runs itself: drop --resume")
+    settings: dict[str, Any] = {}
+    if args.config is not None:
+        settings = read_settings_file(args.config)
+        for key in ("env", "algo", "num_demos", "seed", "out"):
+            settings.pop(key, None)  # the sweep's axes and directory decide these
+    settings.update(overrides_from_args(args, TrainConfig))
+    for name, cls in PART_CONFIGS.items():
+        given = overrides_from_args(args, cls, prefix=name)
+        if given:
+            settings[name] = {**(settings.get(name) or {}), **given}
+    return {k: v for k, v in settings.items() if v is not None or k not in PART_CONFIGS}
+
+
+def _spec_from_args(args: argparse.Namespace, rest: list[str]) -> Any:
+    from ilfo.experiments import SweepSpec, parse_seeds
+    from ilfo.files import read_settings_file
+
+    axes = {
+        "env": args.env,
+        "algo": args.algo,
+        "num_demos": args.num_demos,
+        "seed": None if args.seeds is None else parse_seeds(args.seeds),
+    }
+    given = {k: v for k, v in axes.items() if v is not None}
+    if args.spec is None and not given and not rest and args.retries is None:
+        return None
+    raw: dict[str, Any] = read_settings_file(args.spec) if args.spec else {}
+    spec = SweepSpec.from_dict(raw, args.spec or "the command line")
+    config = {**spec.config, **_train_settings(rest)} if rest else dict(spec.config)
+    changes: dict[str, Any] = {**given, "config": config}
+    if args.retries is not None:
+        changes["retries"] = args.retries
+    return SweepSpec(**{**spec.to_dict(), **changes})
+
+
+def _run_sweep(args: argparse.Namespace) -> int:
+    from ilfo.experiments import (
+        LocalBackend,
+        RayBackend,
+        create_sweep,
+        open_sweep,
+        progress_line,
+        record_attempt,
+        run_sweep,
+    )
+
+    rest = list(args.rest)
+    spec = _spec_from_args(args, rest)
+    root = Path(args.dir)
+    if spec is None:
+        sweep = open_sweep(root)
+    elif args.dry_run:
+        from ilfo.experiments import expand
+
+        for run in expand(spec):
+            print(run.name)
+        return 0
+    else:
+        sweep = create_sweep(root, spec)
+    statuses = sweep.statuses()
+    if args.dry_run:
+        for status in statuses:
+            print(f"{status.name}  {status.state}")
+        return 0
+    if args.retry_failed:
+        for status in statuses:
+            if status.state == "failed":
+                record_attempt(sweep, status.name, "reset")
+    if args.backend == "ray":
+        backend: Any = RayBackend(args.address, cores_per_run=args.cores_per_run)
+    else:
+        if args.address is not None:
+            raise ValueError("--address is for --backend ray")
+        backend = LocalBackend(args.cores_per_run, args.workers)
+    print(f"sweep {root}: {len(sweep.runs)} runs, {backend.slots} at once ({args.backend})")
+    print(progress_line(statuses))
+    display = _Progress(statuses, enabled=not args.no_progress)
+    try:
+        final = run_sweep(sweep, backend, on_change=display.update)
+    finally:
+        display.close()
+    print(progress_line(final))
+    failed = [s for s in final if s.state == "failed"]
+    for status in failed:
+        print(f"failed: {status.name}: {status.error} (log: {sweep.log_file(status.name)})")
+    return 1 if failed else 0
+
+
+class _Progress:
+    """A bar over the whole sweep's steps, with the counts by state; events as lines."""
+
+    def __init__(self, statuses: list[Any], enabled: bool) -> None:
+        from tqdm import tqdm
+
+        from ilfo.experiments import summary
+
+        counts = summary(statuses)
+        self._bar = tqdm(
+            total=counts["steps_total"],
+            initial=counts["steps_done"],
+            unit="step",
+            disable=not enabled,
+            file=sys.stderr,
+        )
+
+    def update(self, statuses: list[Any], message: str) -> None:
+        from ilfo.experiments import summary
+
+        counts = summary(statuses)
+        self._bar.n = counts["steps_done"]
+        self._bar.set_postfix_str(
+            f"done {counts['done']} running {counts['running']} failed {counts['failed']} "
+            f"pending {counts['pending']}",
+            refresh=True,
+        )
+        if message:
+            self._bar.write(message)
+
+    def close(self) -> None:
+        self._bar.close()
+
+
+def _run_sweep_status(args: argparse.Namespace) -> int:
+    from ilfo.experiments import open_sweep, progress_line, summary
+
+    sweep = open_sweep(args.dir)
+    statuses = sweep.statuses()
+    if args.json:
+        for status in statuses:
+            print(json.dumps(status.__dict__))
+        return 0
+    width = max(len(s.name) for s in statuses)
+    for s in statuses:
+        error = f"  {s.error}" if s.error and s.state != "done" else ""
+        failures = f"  failures {s.failures}" if s.failures else ""
+        print(f"{s.name:<{width}}  {s.state:<7}  {s.step:>9,}/{s.steps:,}{failures}{error}")
+    counts = summary(statuses)
+    share = counts["steps_done"] / max(1, counts["steps_total"])
+    bar = "#" * round(30 * share)
+    print(f"[{bar:<30}] {progress_line(statuses)}")
+    return 0

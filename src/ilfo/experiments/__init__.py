@@ -1,0 +1,38 @@
+"""Experiments: sweeps of many runs (``sweep``: the manifest and each run's state on disk;
+``backends``: the scheduler, local or on Ray; ``worker``: one run in its own process) and reports
+over them (``stats``, ``report``, ``paper``)."""
+
+from ilfo.experiments.backends import LocalBackend, RayBackend, progress_line, run_sweep
+from ilfo.experiments.sweep import (
+    RunStatus,
+    Sweep,
+    SweepRun,
+    SweepSpec,
+    create_sweep,
+    expand,
+    open_sweep,
+    parse_seeds,
+    read_attempts,
+    record_attempt,
+    run_status,
+    summary,
+)
+
+__all__ = [
+    "LocalBackend",
+    "RayBackend",
+    "RunStatus",
+    "Sweep",
+    "SweepRun",
+    "SweepSpec",
+    "create_sweep",
+    "expand",
+    "open_sweep",
+    "parse_seeds",
+    "progress_line",
+    "read_attempts",
+    "record_attempt",
+    "run_status",
+    "run_sweep",
+    "summary",
+]

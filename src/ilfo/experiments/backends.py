@@ -1,0 +1,288 @@
+"""Running a sweep's runs: one scheduler, two backends.
+
+``run_sweep`` keeps as many runs going as the backend has slots, each a worker process
+(``ilfo.experiments.worker``) that trains or resumes one run. A run that ends with an error is
+started again while its failures are within the sweep's ``retries``; a run that another process
+is training (its run lock is held) is waited for, not started twice. Ctrl-C interrupts every
+worker (each checkpoints first) and returns; starting the sweep again continues it.
+
+- ``LocalBackend`` (the default, no dependency): a pool sized to this machine's cores, each
+  worker pinned to its own ``cores_per_run`` CPUs with BLAS/OpenMP threads to match.
+- ``RayBackend``: each run a Ray task holding ``cores_per_run`` CPUs of a cluster (or a local
+  Ray instance); the sweep directory must be on a file system every node sees. A node lost
+  under a run makes Ray start the task again, and the worker resumes from the checkpoint.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from typing import Any, Protocol
+
+from ilfo.experiments.sweep import RunStatus, Sweep, record_attempt, run_status, summary
+from ilfo.experiments.worker import PARENT_SIGNAL_ENV, thread_environment
+
+EXIT_DONE, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
+
+
+class Job(Protocol):
+    """A started worker."""
+
+    name: str
+
+    def poll(self) -> int | None:
+        """Its exit status once it has ended (negative: killed by that signal), else None."""
+        ...
+
+    def interrupt(self) -> None:
+        """Ask it to checkpoint and stop."""
+        ...
+
+
+class Backend(Protocol):
+    """Where workers run."""
+
+    slots: int
+    """How many runs at once."""
+
+    def start(self, sweep: Sweep, name: str, slot: int) -> Job: ...
+
+    def close(self) -> None: ...
+
+
+def worker_command(sweep: Sweep, name: str) -> list[str]:
+    return [sys.executable, "-m", "ilfo.experiments.worker", str(sweep.root), name]
+
+
+# ---------------------------------------------------------------------------------- local
+class _ProcessJob:
+    def __init__(self, name: str, process: subprocess.Popen[bytes]) -> None:
+        self.name, self.process = name, process
+
+    def poll(self) -> int | None:
+        return self.process.poll()
+
+    def interrupt(self) -> None:
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGINT)
+
+
+class LocalBackend:
+    """Worker processes on this machine, each pinned to ``cores_per_run`` CPUs of its own."""
+
+    def __init__(self, cores_per_run: int = 1, workers: int | None = None) -> None:
+        cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
+        count = len(cpus) if cpus is not None else os.cpu_count() or 1
+        if cores_per_run < 1:
+            raise ValueError(f"cores_per_run must be >= 1, got {cores_per_run}")
+        if cores_per_run > count:
+            raise ValueError(f"cores_per_run {cores_per_run} exceeds this machine's {count} CPUs")
+        fit = count // cores_per_run
+        if workers is not None and not 1 <= workers <= fit:
+            raise ValueError(
+                f"workers must be between 1 and {fit} ({count} CPUs / {cores_per_run} per run), "
+                f"got {workers}"
+            )
+        self.cores_per_run = cores_per_run
+        self.slots = fit if workers is None else workers
+        self.cpu_sets = (
+            [cpus[i * cores_per_run : (i + 1) * cores_per_run] for i in range(self.slots)]
+            if cpus is not None
+            else [None] * self.slots
+        )
+
+    def start(self, sweep: Sweep, name: str, slot: int) -> Job:
+        env = {
+            **os.environ,
+            **thread_environment(self.cores_per_run, self.cpu_sets[slot]),
+            PARENT_SIGNAL_ENV: "1",
+        }
+        log = sweep.log_file(name)
+        log.parent.mkdir(parents=True, exist_ok=True)
+        with log.open("ab") as out:
+            process = subprocess.Popen(
+                worker_command(sweep, name),
+                env=env,
+                stdin=subprocess.DEVNULL,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,  # Ctrl-C at the terminal reaches the sweep, which relays it
+            )
+        return _ProcessJob(name, process)
+
+    def close(self) -> None:
+        pass
+
+
+# ------------------------------------------------------------------------------------ Ray
+def _ray_worker(command: list[str], env: dict[str, str], log: str) -> int:
+    """A Ray task: one worker process on the node Ray chose; Ray's cancel interrupts it."""
+    environ = {**os.environ, **env}
+    with open(log, "ab") as out:
+        process = subprocess.Popen(command, env=environ, stdout=out, stderr=subprocess.STDOUT)
+        try:
+            return process.wait()
+        except KeyboardInterrupt:  # ray.cancel
+            process.send_signal(signal.SIGINT)
+            return process.wait()
+
+
+class _RayJob:
+    def __init__(self, name: str, ref: Any, ray: Any) -> None:
+        self.name, self.ref, self._ray = name, ref, ray
+        self._exit: int | None = None
+
+    def poll(self) -> int | None:
+        if self._exit is not None:
+            return self._exit
+        ready, _ = self._ray.wait([self.ref], timeout=0)
+        if not ready:
+            return None
+        try:
+            self._exit = int(self._ray.get(self.ref))
+        except self._ray.exceptions.TaskCancelledError:
+            self._exit = EXIT_INTERRUPTED
+        except self._ray.exceptions.RayError:  # its node lost beyond Ray's retries
+            self._exit = -int(signal.SIGKILL)
+        return self._exit
+
+    def interrupt(self) -> None:
+        self._ray.cancel(self.ref)
+
+
+class RayBackend:
+    """Each run a Ray task of ``cores_per_run`` CPUs; ``address`` None starts a local Ray
+    instance (``num_cpus`` of this machine's), ``"auto"`` or ``HOST:PORT`` joins a cluster."""
+
+    def __init__(
+        self,
+        address: str | None = None,
+        cores_per_run: int = 1,
+        num_cpus: int | None = None,
+        node_retries: int = 3,
+    ) -> None:
+        try:
+            import ray
+        except ImportError:
+            raise ValueError(
+                "the Ray backend needs Ray: pip install -e '.[ray]' (or pip install 'ilfo[ray]')"
+            ) from None
+        if cores_per_run < 1:
+            raise ValueError(f"cores_per_run must be >= 1, got {cores_per_run}")
+        self._ray = ray
+        self._owns = not ray.is_initialized()
+        if self._owns:
+            kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
+            if address is None:
+                kwargs["num_cpus"] = num_cpus
+            else:
+                kwargs["address"] = address
+            ray.init(**kwargs)
+        total = int(ray.cluster_resources().get("CPU", 1))
+        if cores_per_run > total:
+            raise ValueError(f"cores_per_run {cores_per_run} exceeds the cluster's {total} CPUs")
+        self.cores_per_run = cores_per_run
+        self.slots = max(1, total // cores_per_run)
+        self._task = ray.remote(num_cpus=cores_per_run, max_retries=node_retries)(_ray_worker)
+
+    def start(self, sweep: Sweep, name: str, slot: int) -> Job:
+        log = sweep.log_file(name)
+        log.parent.mkdir(parents=True, exist_ok=True)
+        env = thread_environment(self.cores_per_run)
+        ref = self._task.remote(worker_command(sweep, name), env, str(log.resolve()))
+        return _RayJob(name, ref, self._ray)
+
+    def close(self) -> None:
+        if self._owns:
+            self._ray.shutdown()
+
+
+# ------------------------------------------------------------------------------ scheduler
+def run_sweep(
+    sweep: Sweep,
+    backend: Backend,
+    *,
+    poll_seconds: float = 1.0,
+    on_change: Callable[[list[RunStatus], str], None] | None = None,
+) -> list[RunStatus]:
+    """Run the sweep's unfinished runs to their ends (see the module); returns every run's
+    final status. ``on_change(statuses, message)`` is called at each start and end (and about
+    every ``poll_seconds`` with an empty message) for progress display."""
+    by_name = {run.name: run for run in sweep.runs}
+    statuses = {s.name: s for s in sweep.statuses()}
+    queue = [name for name, s in statuses.items() if s.state == "pending"]
+    elsewhere = [name for name, s in statuses.items() if s.state == "running"]
+    active: dict[int, Job] = {}  # slot -> job
+    notify = on_change or (lambda statuses, message: None)
+
+    def refresh(name: str) -> RunStatus:
+        statuses[name] = run_status(sweep, by_name[name])
+        return statuses[name]
+
+    try:
+        while queue or active or elsewhere:
+            for slot in range(backend.slots):
+                if slot not in active and queue:
+                    name = queue.pop(0)
+                    active[slot] = backend.start(sweep, name, slot)
+                    notify(list(statuses.values()), f"started {name}")
+            time.sleep(poll_seconds)
+            for slot, job in list(active.items()):
+                code = job.poll()
+                if code is None:
+                    continue
+                del active[slot]
+                if code not in (EXIT_DONE, EXIT_FAILED, EXIT_INTERRUPTED):
+                    # Killed (OOM, SIGKILL, a lost node): the worker could not say so itself.
+                    record_attempt(
+                        sweep, job.name, "end", status="killed", error=f"worker exit {code}"
+                    )
+                status = refresh(job.name)
+                if status.state == "pending":
+                    queue.append(job.name)  # an error within the retries, or an interruption
+                notify(list(statuses.values()), f"{job.name}: {_ended(status, code)}")
+            for name in list(elsewhere):
+                status = refresh(name)
+                if status.state != "running":
+                    elsewhere.remove(name)
+                    if status.state == "pending":
+                        queue.append(name)
+            notify(list(statuses.values()), "")
+    except KeyboardInterrupt:
+        for job in active.values():
+            job.interrupt()
+        deadline = time.monotonic() + 300  # each worker checkpoints before it exits
+        while active and time.monotonic() < deadline:
+            for slot, job in list(active.items()):
+                if job.poll() is not None:
+                    del active[slot]
+            time.sleep(0.2)
+        raise
+    finally:
+        backend.close()
+    return [refresh(name) for name in by_name]
+
+
+def _ended(status: RunStatus, code: int) -> str:
+    if status.state == "done":
+        return "done"
+    if code == EXIT_INTERRUPTED:
+        return "interrupted (checkpointed; it continues)"
+    if status.state == "failed":
+        return f"failed {status.failures} times, given up: {status.error}"
+    return f"failed ({status.error}); will retry"
+
+
+def progress_line(statuses: list[RunStatus]) -> str:
+    """One line: counts by state and the steps done of all."""
+    counts = summary(statuses)
+    share = counts["steps_done"] / max(1, counts["steps_total"])
+    return (
+        f"{counts['done']} done, {counts['running']} running, {counts['failed']} failed, "
+        f"{counts['pending']} pending; {counts['steps_done']:,}/{counts['steps_total']:,} "
+        f"steps ({share:.1%})"
+    )

@@ -1,0 +1,388 @@
+"""Sweeps: a manifest of runs in a sweep directory, and the state of each run read off the disk.
+
+A sweep is the product env x algo x variant x num_demos x seed of one base config. Its
+directory holds::
+
+    sweep.json            the spec as given and every run's full config (the manifest)
+    runs/NAME/            each run's ordinary run directory (``ilfo train``'s layout)
+    attempts/NAME.jsonl   one line per start and end of the run's worker (host, CPUs, threads,
+                          exit, error)
+    logs/NAME.log         the worker's output
+
+Nothing else records progress: a run is *done* when its final policy is written and its newest
+checkpoint reached the run's steps, *running* while a process holds its run lock, *failed* when
+it ended with an error more often than the sweep allows, else *pending* (with the steps its
+metrics reached). So a sweep can be killed at any moment and started again: finished runs are
+skipped, interrupted ones resume from their checkpoints, and each run is trained exactly once.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import socket
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from ilfo.files import read_settings_file, write_json_atomic
+
+MANIFEST_FILE = "sweep.json"
+RUNS_DIR = "runs"
+ATTEMPTS_DIR = "attempts"
+LOGS_DIR = "logs"
+AXES = ("env", "algo", "num_demos", "seed")
+"""The axes of a sweep, besides its named variants."""
+
+RunState = Literal["done", "running", "failed", "pending"]
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """What a sweep runs: every combination of the axes, each with the base ``config``."""
+
+    env: tuple[str, ...] = ("Hopper-v5",)
+    """Environment ids."""
+    algo: tuple[str, ...] = ("oops-td3",)
+    """Algorithms (``ilfo.algos``)."""
+    num_demos: tuple[int, ...] = (1,)
+    """Numbers of demos imitated."""
+    seed: tuple[int, ...] = (0,)
+    """Seeds."""
+    config: Mapping[str, Any] = field(default_factory=dict)
+    """Settings of every run, as ``ilfo train``'s flags or a config file give them
+    (``TrainConfig`` fields; a part's dict, e.g. ``{"td3": {"batch_size": 256}}``, changes
+    single fields of its default). A part's settings apply to the runs whose algo uses it."""
+    variants: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    """Named changes of ``config`` (e.g. ``{"lambda0.1": {"oops": {"epsilon": 0.1}}}``), each
+    a further axis value; none: one unnamed variant, the base config."""
+    retries: int = 2
+    """How many times a run that ended with an error is started again."""
+
+    def __post_init__(self) -> None:
+        for name in AXES:
+            values = getattr(self, name)
+            if isinstance(values, (str, int)):
+                values = (values,)
+            values = tuple(values)
+            if not values:
+                raise ValueError(f"sweep {name} must list at least one value")
+            if len(set(values)) != len(values):
+                raise ValueError(f"sweep {name} lists a value twice: {list(values)}")
+            object.__setattr__(self, name, values)
+        for name in ("num_demos", "seed"):
+            for value in getattr(self, name):
+                if isinstance(value, bool) or not isinstance(value, int):
+                    raise ValueError(f"sweep {name} values must be integers, got {value!r}")
+        # As JSON has them (lists for tuples), so that a spec equals its manifest's copy.
+        try:
+            object.__setattr__(self, "config", json.loads(json.dumps(dict(self.config))))
+            variants = {k: dict(v) for k, v in dict(self.variants).items()}
+            object.__setattr__(self, "variants", json.loads(json.dumps(variants)))
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"sweep config and variants must be JSON data: {err}") from None
+        for key in self.config:
+            if key in AXES or key == "out":
+                where = "its own axis" if key in AXES else "the sweep directory"
+                raise ValueError(f"sweep config cannot set {key!r}: {where} sets it")
+        for name, change in self.variants.items():
+            if not name or "__" in name or "/" in name:
+                raise ValueError(f"variant name {name!r} must be non-empty, without '__' or '/'")
+            bad = [key for key in change if key in AXES or key == "out"]
+            if bad:
+                raise ValueError(f"variant {name!r} cannot set {', '.join(bad)}")
+        if isinstance(self.retries, bool) or not isinstance(self.retries, int) or self.retries < 0:
+            raise ValueError(f"retries must be an integer >= 0, got {self.retries!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The spec as JSON-ready data (what ``from_dict`` reads back)."""
+        out = dataclasses.asdict(self)
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in out.items()}
+
+    @classmethod
+    def from_dict(cls, raw: Mapping[str, Any], source: str | Path = "sweep spec") -> SweepSpec:
+        """A spec from a dict (a spec file); ``seeds``/``envs``/``algos`` are accepted for
+        the axes, a seed range as ``"0-4"``, and ``config`` may name a settings file."""
+        aliases = {"envs": "env", "algos": "algo", "seeds": "seed"}
+        values = {aliases.get(k, k): v for k, v in raw.items()}
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(
+                f"{source}: unknown sweep setting(s) {', '.join(map(repr, unknown))}; "
+                f"known: {', '.join(sorted(known))}"
+            )
+        if isinstance(values.get("seed"), str):
+            values["seed"] = parse_seeds([values["seed"]])
+        if isinstance(values.get("config"), str):
+            values["config"] = read_settings_file(values["config"])
+        try:
+            return cls(**values)
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"{source}: {err}") from None
+
+
+def parse_seeds(items: Sequence[str | int]) -> tuple[int, ...]:
+    """Seeds from ``["0-4"]``, ``["0", "3", "7"]`` or a mix (ranges include both ends)."""
+    seeds: list[int] = []
+    for item in items:
+        text = str(item).strip()
+        low, dash, high = text.partition("-")
+        try:
+            if dash and low:
+                first, last = int(low), int(high)
+                if last < first:
+                    raise ValueError
+                seeds.extend(range(first, last + 1))
+            else:
+                seeds.append(int(text))
+        except ValueError:
+            raise ValueError(f"seeds: {text!r} is neither a seed nor a range like 0-4") from None
+    return tuple(seeds)
+
+
+@dataclass(frozen=True)
+class SweepRun:
+    """One run of a sweep: its name (``env__algo[__variant]__demosN__seed``) and full config."""
+
+    name: str
+    config: dict[str, Any]
+    """The run's resolved ``TrainConfig`` as config.json records it."""
+    variant: str | None = None
+
+    @property
+    def steps(self) -> int:
+        return int(self.config["steps"])
+
+
+def run_name_of(env: str, algo: str, variant: str | None, num_demos: int, seed: int) -> str:
+    """A sweep run's directory name, CleanRL's env__algo__seed with the other axes inside."""
+    middle = f"__{variant}" if variant else ""
+    return f"{env}__{algo}{middle}__demos{num_demos}__{seed}"
+
+
+def expand(spec: SweepSpec) -> list[SweepRun]:
+    """Every run of the spec, each config built and checked now (an error names the run), in
+    seed-major order so that a partly done sweep covers every cell with its first seeds."""
+    from ilfo.algos import PART_CONFIGS, recipe
+    from ilfo.training import config_from_settings
+
+    variants: list[tuple[str | None, Mapping[str, Any]]] = list(spec.variants.items()) or [
+        (None, {})
+    ]
+    parts_given = {k for k in spec.config if k in PART_CONFIGS}
+    parts_used: set[str] = set()
+    runs = []
+    for seed in spec.seed:
+        for env in spec.env:
+            for algo in spec.algo:
+                algo_parts = {recipe(algo).agent, recipe(algo).reward}
+                for variant, change in variants:
+                    for num_demos in spec.num_demos:
+                        name = run_name_of(env, algo, variant, num_demos, seed)
+                        settings = _merge(spec.config, change)
+                        # A part's settings apply where the algo uses that part (a sweep over
+                        # oops-td3 and pwil-td3 can set OOPS's lambda).
+                        unused = [k for k in settings if k in PART_CONFIGS and k not in algo_parts]
+                        parts_used |= {k for k in settings if k in PART_CONFIGS} - set(unused)
+                        settings = {k: v for k, v in settings.items() if k not in unused}
+                        settings.update(env=env, algo=algo, num_demos=num_demos, seed=seed)
+                        config = config_from_settings(settings, f"sweep run {name}")
+                        runs.append(SweepRun(name, _config_record(config), variant))
+    unused_parts = sorted(parts_given - parts_used)
+    if unused_parts:
+        raise ValueError(
+            f"sweep config sets {', '.join(unused_parts)}, which no algo of the sweep uses "
+            f"({', '.join(spec.algo)})"
+        )
+    return runs
+
+
+def _merge(base: Mapping[str, Any], change: Mapping[str, Any]) -> dict[str, Any]:
+    """``base`` with ``change`` on top; a part's dicts merge field by field."""
+    out = dict(base)
+    for key, value in change.items():
+        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
+            out[key] = {**out[key], **value}
+        else:
+            out[key] = value
+    return out
+
+
+def _config_record(config: Any) -> dict[str, Any]:
+    """A TrainConfig as JSON-ready data (tuples as lists, as config.json has them)."""
+    return json.loads(json.dumps(dataclasses.asdict(config)))
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """A sweep directory and its manifest."""
+
+    root: Path
+    spec: SweepSpec
+    runs: tuple[SweepRun, ...]
+
+    def run(self, name: str) -> SweepRun:
+        for run in self.runs:
+            if run.name == name:
+                return run
+        raise KeyError(f"{self.root} has no run named {name!r}")
+
+    def run_dir(self, name: str) -> Path:
+        return self.root / RUNS_DIR / name
+
+    def attempts_file(self, name: str) -> Path:
+        return self.root / ATTEMPTS_DIR / f"{name}.jsonl"
+
+    def log_file(self, name: str) -> Path:
+        return self.root / LOGS_DIR / f"{name}.log"
+
+    def statuses(self) -> list[RunStatus]:
+        return [run_status(self, run) for run in self.runs]
+
+
+def create_sweep(root: str | Path, spec: SweepSpec) -> Sweep:
+    """Write the manifest of ``spec`` to ``root`` (made if missing). A directory that holds a
+    sweep already is reused only for the same spec (``open_sweep`` continues it)."""
+    root = Path(root)
+    runs = tuple(expand(spec))
+    manifest = root / MANIFEST_FILE
+    if manifest.exists():
+        existing = open_sweep(root)
+        if existing.spec != spec:
+            raise ValueError(
+                f"{root} holds another sweep (its spec differs from this one); continue it "
+                "with `ilfo sweep run` and no spec, or choose a new directory"
+            )
+        return existing
+    root.mkdir(parents=True, exist_ok=True)
+    for sub in (RUNS_DIR, ATTEMPTS_DIR, LOGS_DIR):
+        (root / sub).mkdir(exist_ok=True)
+    record = {
+        "spec": spec.to_dict(),
+        "runs": [{"name": r.name, "variant": r.variant, "config": r.config} for r in runs],
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+    write_json_atomic(manifest, record)
+    return Sweep(root, spec, runs)
+
+
+def open_sweep(root: str | Path) -> Sweep:
+    """The sweep in ``root``, read from its manifest (clear errors for what is not one)."""
+    root = Path(root)
+    path = root / MANIFEST_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{root} is not a sweep directory (no {MANIFEST_FILE})")
+    raw = read_settings_file(path)
+    try:
+        spec = SweepSpec.from_dict(raw["spec"], path)
+        runs = tuple(SweepRun(r["name"], r["config"], r.get("variant")) for r in raw["runs"])
+    except (KeyError, TypeError) as err:
+        raise ValueError(f"{path} is not a sweep manifest ({err!r} missing or wrong)") from None
+    return Sweep(root, spec, runs)
+
+
+# ------------------------------------------------------------------------------ run states
+@dataclass(frozen=True)
+class RunStatus:
+    """Where one run of a sweep stands, as read off its files."""
+
+    name: str
+    state: RunState
+    step: int
+    """Environment steps its metrics reached (0 before the first episode)."""
+    steps: int
+    """Its budget."""
+    failures: int
+    """How many of its attempts ended with an error (not counting interruptions)."""
+    error: str | None = None
+    """The last failure's message."""
+
+
+def run_status(sweep: Sweep, run: SweepRun) -> RunStatus:
+    """The run's state (see the module's docstring)."""
+    from ilfo.training.run_dir import FINAL_POLICY_FILE, checkpoint_steps
+
+    run_dir = sweep.run_dir(run.name)
+    events = read_attempts(sweep, run.name)
+    resets = [i for i, e in enumerate(events) if e.get("event") == "reset"]
+    events = events[resets[-1] + 1 :] if resets else events  # failures before a reset forgiven
+    ended = [e for e in events if e.get("event") == "end"]
+    failed = [e for e in ended if e.get("status") in ("error", "killed")]
+    error = failed[-1].get("error") if failed else None
+    checkpoints = checkpoint_steps(run_dir)
+    step = max(_metrics_step(run_dir), checkpoints[-1][0] if checkpoints else 0)
+    if (run_dir / FINAL_POLICY_FILE).is_file() and checkpoints and checkpoints[-1][0] >= run.steps:
+        state: RunState = "done"
+    elif _locked(run_dir):
+        state = "running"
+    elif len(failed) > sweep.spec.retries:
+        state = "failed"
+    else:
+        state = "pending"
+    return RunStatus(run.name, state, min(step, run.steps), run.steps, len(failed), error)
+
+
+def _locked(run_dir: Path) -> bool:
+    """Whether a live process holds the run's lock now."""
+    from ilfo.training.run_dir import LOCK_FILE, RunDirInUse, RunLock
+
+    if not (run_dir / LOCK_FILE).exists():
+        return False
+    try:
+        RunLock(run_dir).acquire().release()
+    except RunDirInUse:
+        return True
+    return False
+
+
+def _metrics_step(run_dir: Path) -> int:
+    """The step of metrics.csv's last row (its first column), read from the file's end."""
+    path = run_dir / "metrics.csv"
+    if not path.is_file():
+        return 0
+    with path.open("rb") as f:
+        f.seek(0, 2)
+        f.seek(max(0, f.tell() - 4096))
+        lines = f.read().decode("utf-8", "replace").strip().splitlines()
+    for line in reversed(lines):
+        head = line.split(",", 1)[0]
+        if head.isdigit():
+            return int(head)
+    return 0
+
+
+def read_attempts(sweep: Sweep, name: str) -> list[dict[str, Any]]:
+    """The run's attempt records, oldest first (a torn last line, from a kill, is skipped)."""
+    path = sweep.attempts_file(name)
+    if not path.is_file():
+        return []
+    events = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            events.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return events
+
+
+def record_attempt(sweep: Sweep, name: str, event: str, **fields: Any) -> None:
+    """Append one attempt record with the host and time: ``start``, ``end`` (with a status:
+    done, interrupted, error, killed) or ``reset`` (the failures before it no longer count)."""
+    path = sweep.attempts_file(name)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    line = {"event": event, "time": time.time(), "host": socket.gethostname(), **fields}
+    with path.open("a", encoding="utf-8") as f:
+        f.write(json.dumps(line) + "\n")
+
+
+def summary(statuses: Sequence[RunStatus]) -> dict[str, int]:
+    """Counts of runs by state, and steps done and in all."""
+    counts = {state: 0 for state in ("done", "running", "failed", "pending")}
+    for status in statuses:
+        counts[status.state] += 1
+    counts["steps_done"] = sum(s.steps if s.state == "done" else s.step for s in statuses)
+    counts["steps_total"] = sum(s.steps for s in statuses)
+    return counts

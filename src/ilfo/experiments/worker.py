@@ -1,0 +1,116 @@
+"""One run of a sweep, in its own process: ``python -m ilfo.experiments.worker SWEEP_DIR NAME``.
+
+Started by a sweep backend with its threads pinned (``thread_environment``): the CPU set in
+``ILFO_CPUS`` (applied here, before JAX starts its thread pools, which size themselves by the
+CPUs the process may use) and the BLAS/OpenMP thread counts in the environment. It starts the
+run, or resumes it from its newest checkpoint, and records the attempt's start (with the
+pinning it got) and its end (done, interrupted, or the error) in ``attempts/NAME.jsonl``.
+
+Exit status: 0 done, 130 interrupted (SIGINT: the run checkpointed first), 1 failed.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import traceback
+from collections.abc import Mapping, Sequence
+
+CPUS_ENV = "ILFO_CPUS"
+"""Comma-separated CPU ids the worker pins itself to (unset: no pinning)."""
+PARENT_SIGNAL_ENV = "ILFO_PARENT_DEATH_SIGNAL"
+"""Set by the local backend: the worker gets SIGINT when its sweep process dies (Linux), so
+a killed sweep leaves no orphan runs behind, each checkpointed where it stood."""
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def thread_environment(threads: int, cpus: Sequence[int] | None = None) -> dict[str, str]:
+    """The environment variables that hold a run to ``threads`` threads (and to ``cpus``, where
+    given): BLAS and OpenMP pools of that size, so that runs side by side do not oversubscribe
+    the cores (OpenBLAS slows 10-20x under contention: docs/benchmarks.md)."""
+    if threads < 1:
+        raise ValueError(f"threads must be >= 1, got {threads}")
+    env = dict.fromkeys(THREAD_VARIABLES, str(threads))
+    if cpus is not None:
+        env[CPUS_ENV] = ",".join(str(c) for c in cpus)
+    return env
+
+
+def pin_from_environment(environ: Mapping[str, str] = os.environ) -> list[int] | None:
+    """Apply ``ILFO_CPUS`` to this process (Linux); returns the CPU set now in force."""
+    spec = environ.get(CPUS_ENV)
+    if spec:
+        cpus = {int(c) for c in spec.split(",") if c.strip()}
+        os.sched_setaffinity(0, cpus)
+    return sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
+
+
+def _die_with_parent() -> None:
+    """Ask the kernel for SIGINT when the parent process dies (prctl PR_SET_PDEATHSIG)."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGINT)  # 1: PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # not Linux: a killed sweep may leave the run going
+        pass
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = list(sys.argv[1:] if argv is None else argv)
+    if len(args) != 2:
+        print("usage: python -m ilfo.experiments.worker SWEEP_DIR RUN_NAME", file=sys.stderr)
+        return 2
+    if os.environ.get(PARENT_SIGNAL_ENV):
+        _die_with_parent()
+        if os.getppid() == 1:  # the sweep died before the request took effect
+            return 130
+    cpus = pin_from_environment()
+    from ilfo.experiments.sweep import open_sweep, record_attempt, run_status
+
+    sweep = open_sweep(args[0])
+    run = sweep.run(args[1])
+    threads = {name: os.environ.get(name) for name in THREAD_VARIABLES}
+    record_attempt(sweep, run.name, "start", pid=os.getpid(), cpus=cpus, threads=threads)
+    try:
+        if run_status(sweep, run).state != "done":
+            train_run(sweep.run_dir(run.name), run.config)
+    except KeyboardInterrupt:
+        record_attempt(sweep, run.name, "end", status="interrupted")
+        return 130
+    except BaseException as err:  # recorded for the sweep's status and retries
+        message = f"{type(err).__name__}: {err}"
+        record_attempt(
+            sweep, run.name, "end", status="error", error=message, traceback=traceback.format_exc()
+        )
+        traceback.print_exc()
+        return 1
+    record_attempt(sweep, run.name, "end", status="done")
+    return 0
+
+
+def train_run(run_dir: os.PathLike[str] | str, config: Mapping[str, object]) -> None:
+    """Train the run in ``run_dir`` to its steps: start it, or resume it where it has a config
+    (a run killed before its first checkpoint starts again from step 0)."""
+    import warnings
+    from pathlib import Path
+
+    from ilfo.compilation_cache import enable_compilation_cache
+    from ilfo.training import Trainer, config_from_dict
+
+    enable_compilation_cache()
+    run_dir = Path(run_dir)
+    if (run_dir / "config.json").is_file():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "no complete checkpoint yet": expected here
+            trainer = Trainer.resume(run_dir, progress=False)
+    else:
+        trainer = Trainer(config_from_dict(dict(config), run_dir), run_dir, progress=False)
+    print(f"{run_dir.name}: training to step {trainer.config.steps:,} from {trainer.step:,}")
+    trainer.train()
+    print(f"{run_dir.name}: done; last evaluation {trainer.last_eval}", flush=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
