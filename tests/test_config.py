@@ -173,3 +173,32 @@ def test_the_algo_names_are_the_registry():
     assert algos_using("pwil") == ["pwil-td3"]
     with pytest.raises(ValueError, match="unknown algo 'gail'; choose one of oops-td3"):
         TrainConfig(algo="gail")
+
+
+def test_config_from_settings_file_and_flags(tmp_path):
+    """`ilfo train --config FILE`: a hand-written subset (a part's dict changes single fields of
+    its default), flags over it, and a run's own resolved config.json read back unchanged."""
+    from ilfo.cli.train import config_from_args
+    from ilfo.training import TrainConfig, config_from_settings
+
+    path = tmp_path / "subset.json"
+    path.write_text(json.dumps({"env": "Walker2d-v5", "preset": "fast", "td3": {"tau": 0.01}}))
+    config = config_from_args(str(path), {"seed": 4}, {"td3": {"batch_size": 64}})
+    fast = TrainConfig(preset="fast").part_config("td3")
+    assert config.env == "Walker2d-v5" and config.seed == 4
+    assert config.td3 == dataclasses.replace(fast, tau=0.01, batch_size=64)
+    resolved = config.resolved(horizon=1000)
+    record = json.loads(json.dumps(dataclasses.asdict(resolved)))
+    assert config_from_settings(record, "config.json") == resolved
+    toml = tmp_path / "subset.toml"
+    toml.write_text('algo = "pwil-td3"\n[pwil]\nbeta = 2.0\n')
+    assert config_from_args(str(toml), {}, {}).pwil.beta == 2.0
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"oops": {"nope": 1}}')
+    with pytest.raises(ValueError, match="oops has no setting"):
+        config_from_args(str(bad), {}, {})
+    bad.write_text("[1, 2]")
+    with pytest.raises(ValueError, match="must hold an object"):
+        config_from_args(str(bad), {}, {})
+    with pytest.raises(FileNotFoundError):
+        config_from_args(str(tmp_path / "missing.json"), {}, {})

@@ -1,0 +1,270 @@
+"""Sweeps: manifest expansion, run states read off disk, the scheduler's skip/resume/retry
+bookkeeping (with a fake backend), and one real local sweep killed and started again."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from ilfo.experiments import (
+    SweepSpec,
+    create_sweep,
+    expand,
+    open_sweep,
+    parse_seeds,
+    read_attempts,
+    record_attempt,
+    run_status,
+    run_sweep,
+)
+from ilfo.experiments.worker import pin_from_environment, thread_environment
+from ilfo.training import RunLock
+from ilfo.training.run_dir import CHECKPOINT_FILES, FINAL_POLICY_FILE
+
+TINY = {
+    "demos": str(Path(__file__).parents[2] / "data" / "demos" / "Hopper-v5-scripted.npz"),
+    "horizon": 100,
+    "start_steps": 200,
+    "eval_every": 200,
+    "eval_episodes": 1,
+    "checkpoint_every": 200,
+    "preset": "fast",
+    "replay_capacity": 5000,
+    "steps": 400,
+}
+
+
+def test_expansion_names_order_and_settings():
+    spec = SweepSpec(
+        env=("Hopper-v5",),
+        algo=("oops-td3", "pwil-td3"),
+        num_demos=(1, 4),
+        seed=parse_seeds(["0-1"]),
+        config={**TINY, "oops": {"reg": 0.1}},
+    )
+    runs = expand(spec)
+    assert len(runs) == 2 * 2 * 2
+    assert runs[0].name == "Hopper-v5__oops-td3__demos1__0"
+    assert [r.config["seed"] for r in runs] == [0] * 4 + [1] * 4  # seed-major
+    oops = [r for r in runs if r.config["algo"] == "oops-td3"]
+    pwil = [r for r in runs if r.config["algo"] == "pwil-td3"]
+    assert all(r.config["oops"]["reg"] == 0.1 for r in oops)
+    assert all(r.config["oops"] is None for r in pwil)  # OOPS's settings skip PWIL's runs
+    assert all(r.config["oops"]["seed"] == r.config["seed"] for r in oops)
+    assert {r.config["num_demos"] for r in runs} == {1, 4}
+
+
+def test_variants_merge_into_the_parts():
+    spec = SweepSpec(
+        config={**TINY, "oops": {"reg": 0.1}},
+        variants={"l005": {"oops": {"reg": 0.005}}, "states": {"oops": {"atoms": "states"}}},
+    )
+    runs = {r.variant: r for r in expand(spec)}
+    assert runs["l005"].name == "Hopper-v5__oops-td3__l005__demos1__0"
+    assert runs["l005"].config["oops"]["reg"] == 0.005
+    assert runs["states"].config["oops"] == {**runs["states"].config["oops"], "reg": 0.1}
+    assert runs["states"].config["oops"]["atoms"] == "states"
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"config": {"seed": 3}}, "its own axis"),
+        ({"config": {"out": "x"}}, "sweep directory"),
+        ({"seed": (0, 0)}, "twice"),
+        ({"algo": ()}, "at least one"),
+        ({"config": {"sac": {"tau": 0.01}}}, "no algo of the sweep uses"),
+        ({"config": {"oops": {"nope": 1}}}, "no setting"),
+        ({"config": {"steps": 0}}, "steps must be >= 1"),
+        ({"variants": {"a__b": {}}}, "variant name"),
+        ({"retries": -1}, "retries"),
+    ],
+)
+def test_bad_specs_are_refused_clearly(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        expand(SweepSpec(**kwargs))
+
+
+def test_parse_seeds():
+    assert parse_seeds(["0-2", "7"]) == (0, 1, 2, 7)
+    with pytest.raises(ValueError, match="neither a seed nor a range"):
+        parse_seeds(["3-1"])
+
+
+def test_manifest_round_trip_and_a_different_spec_refused(tmp_path):
+    spec = SweepSpec(
+        algo=("oops-td3", "pwil-td3"), config={**TINY, "td3": {"critic_hidden": [64, 64]}}
+    )
+    sweep = create_sweep(tmp_path / "s", spec)
+    again = open_sweep(tmp_path / "s")
+    assert again.spec == spec and again.runs == sweep.runs
+    assert create_sweep(tmp_path / "s", spec).runs == sweep.runs  # same spec: the same sweep
+    with pytest.raises(ValueError, match="holds another sweep"):
+        create_sweep(tmp_path / "s", SweepSpec(config=TINY))
+    with pytest.raises(FileNotFoundError, match="not a sweep directory"):
+        open_sweep(tmp_path)
+
+
+def _finish(sweep, name, step=None):
+    """What a finished run leaves: a complete checkpoint at its steps and the final policy."""
+    run = sweep.run(name)
+    ckpt = sweep.run_dir(name) / "checkpoints" / f"step_{step or run.steps}"
+    ckpt.mkdir(parents=True)
+    for file in CHECKPOINT_FILES:
+        (ckpt / file).write_text("x")
+    (sweep.run_dir(name) / FINAL_POLICY_FILE).write_text("x")
+
+
+def test_run_states_read_off_the_disk(tmp_path):
+    sweep = create_sweep(tmp_path, SweepSpec(seed=(0, 1, 2, 3), config=TINY, retries=1))
+    a, b, c, d = (r.name for r in sweep.runs)
+    _finish(sweep, a)
+    _finish(sweep, d, step=200)  # a final policy, but short of its steps (a shortened run)
+    (sweep.run_dir(b)).mkdir(parents=True)
+    lock = RunLock(sweep.run_dir(b)).acquire()
+    (sweep.run_dir(c)).mkdir(parents=True)
+    (sweep.run_dir(c) / "metrics.csv").write_text("step,episode\n100,1\n200,2\n")
+    for _ in range(2):
+        record_attempt(sweep, c, "end", status="error", error="boom")
+    states = {s.name: s for s in sweep.statuses()}
+    assert states[a].state == "done"
+    assert states[b].state == "running"
+    assert states[c].state == "failed" and states[c].failures == 2 and states[c].error == "boom"
+    assert states[c].step == 200
+    assert states[d].state == "pending"
+    lock.release()
+    assert run_status(sweep, sweep.run(b)).state == "pending"
+    record_attempt(sweep, c, "reset")
+    assert run_status(sweep, sweep.run(c)).state == "pending"
+
+
+class _FakeJob:
+    def __init__(self, name, code):
+        self.name, self.code = name, code
+
+    def poll(self):
+        return self.code
+
+    def interrupt(self):
+        pass
+
+
+class _FakeBackend:
+    """Jobs that end at once, as planned per run: 'done', 'error' (the worker says so) or
+    'kill' (a SIGKILL: nothing recorded by the worker)."""
+
+    slots = 2
+
+    def __init__(self, plan):
+        self.plan = plan
+        self.started = []
+
+    def start(self, sweep, name, slot):
+        self.started.append(name)
+        outcome = self.plan[name].pop(0)
+        record_attempt(sweep, name, "start")
+        if outcome == "done":
+            _finish(sweep, name)
+            record_attempt(sweep, name, "end", status="done")
+            return _FakeJob(name, 0)
+        if outcome == "error":
+            record_attempt(sweep, name, "end", status="error", error="ValueError: boom")
+            return _FakeJob(name, 1)
+        return _FakeJob(name, -9)
+
+    def close(self):
+        pass
+
+
+def test_scheduler_skips_retries_and_gives_up(tmp_path):
+    sweep = create_sweep(tmp_path, SweepSpec(seed=(0, 1, 2, 3), config=TINY, retries=2))
+    a, b, c, d = (r.name for r in sweep.runs)
+    _finish(sweep, a)  # done before the sweep starts: skipped
+    plan = {b: ["done"], c: ["error", "kill", "done"], d: ["error", "error", "error"]}
+    backend = _FakeBackend(plan)
+    final = {s.name: s for s in run_sweep(sweep, backend, poll_seconds=0)}
+    assert backend.started.count(a) == 0
+    assert backend.started.count(b) == 1
+    assert backend.started.count(c) == 3 and final[c].state == "done"
+    assert backend.started.count(d) == 3 and final[d].state == "failed"
+    assert final[d].failures == 3 and "boom" in final[d].error
+    killed = [e for e in read_attempts(sweep, c) if e.get("status") == "killed"]
+    assert len(killed) == 1 and killed[0]["error"] == "worker exit -9"
+    # Started again, nothing is left to do: no run starts twice.
+    backend = _FakeBackend({})
+    run_sweep(sweep, backend, poll_seconds=0)
+    assert backend.started == []
+
+
+def test_thread_environment_and_pinning():
+    env = thread_environment(2, [0])
+    assert env["OPENBLAS_NUM_THREADS"] == env["OMP_NUM_THREADS"] == "2"
+    before = os.sched_getaffinity(0)
+    try:
+        assert pin_from_environment({"ILFO_CPUS": "0"}) == [0]
+        assert os.sched_getaffinity(0) == {0}
+    finally:
+        os.sched_setaffinity(0, before)
+    with pytest.raises(ValueError):
+        thread_environment(0)
+
+
+def _sweep_cli(root, *extra):
+    return [
+        sys.executable, "-m", "ilfo.cli", "sweep", "run", str(root), "--no-progress",
+        *extra,
+    ]  # fmt: skip
+
+
+def test_killed_sweep_restarted_finishes_each_run_exactly_once(tmp_path):
+    """A real local sweep of two tiny runs, SIGKILLed once a run has checkpointed: its workers
+    checkpoint and stop with it, and the restarted sweep resumes them; every run ends with one
+    metrics row per episode (nothing trained twice), pinned to a CPU of its own."""
+    root = tmp_path / "sweep"
+    flags = [f"--{k.replace('_', '-')}={v}" for k, v in {**TINY, "steps": 600}.items()]
+    cmd = _sweep_cli(root, "--seeds", "0", "1", *flags)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    deadline = time.monotonic() + 240
+    while time.monotonic() < deadline and proc.poll() is None:
+        if list(root.glob("runs/*/checkpoints/step_*/state.json")):
+            break
+        time.sleep(0.2)
+    assert proc.poll() is None, proc.stdout.read().decode()
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    sweep = open_sweep(root)
+    deadline = time.monotonic() + 120  # the workers checkpoint and exit on their own
+    while time.monotonic() < deadline and any(s.state == "running" for s in sweep.statuses()):
+        time.sleep(0.2)
+    assert not any(s.state == "done" for s in sweep.statuses())
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stdout + out.stderr
+    statuses = sweep.statuses()
+    assert [s.state for s in statuses] == ["done", "done"]
+    assert sorted(p.name for p in (root / "runs").iterdir()) == sorted(r.name for r in sweep.runs)
+    cpus = []
+    for run in sweep.runs:
+        rows = (sweep.run_dir(run.name) / "metrics.csv").read_text().splitlines()[1:]
+        steps = [int(row.split(",")[0]) for row in rows]
+        assert steps == sorted(set(steps)) and steps[-1] == 600  # each episode logged once
+        events = read_attempts(sweep, run.name)
+        ends = [e["status"] for e in events if e["event"] == "end"]
+        assert ends[-1] == "done" and ends.count("done") == 1 and "error" not in ends
+        starts = [e for e in events if e["event"] == "start"]
+        assert all(len(e["cpus"]) == 1 and e["threads"]["OPENBLAS_NUM_THREADS"] == "1"
+                   for e in starts)  # fmt: skip
+        cpus.append(starts[-1]["cpus"][0])
+    if len(os.sched_getaffinity(0)) >= 2:
+        assert len(set(cpus)) == 2  # the two runs side by side on CPUs of their own
+    status = subprocess.run(
+        [sys.executable, "-m", "ilfo.cli", "sweep", "status", str(root), "--json"],
+        capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    assert [json.loads(line)["state"] for line in status.stdout.splitlines()] == ["done"] * 2
