@@ -26,6 +26,7 @@ import numpy as np
 from ilfo import demos as demo_io
 from ilfo.agents import Policy, policy_of
 from ilfo.envs import make_env, termination_is_finish
+from ilfo.experiments.paper import paper_expert_returns
 from ilfo.files import load_msgpack
 from ilfo.paths import DATA_DIR
 from ilfo.training import (
@@ -55,18 +56,9 @@ EVAL_FIRST_SEED = 1000
 """First seed of expert evaluations: unlike the demos' (0, 1, ...)."""
 
 
-PAPER_EXPERT_RETURNS: dict[str, float] = {
-    "Hopper-v5": 3420.0,
-    "Walker2d-v5": 4370.0,
-    "HalfCheetah-v5": 11340.0,
-    "Ant-v5": 5018.0,
-    "Humanoid-v5": 5973.0,
-    "BipedalWalker-v3": 318.9,
-    "MinitaurBulletEnv-v0": 12.36,
-    "MinitaurBulletDuckEnv-v0": 10.68,
-}
-"""The paper's experts' mean returns (its main results table, and the one of BipedalWalker and
-the Minitaur tasks), the targets of ilfo's experts; each card says how far its expert got."""
+PAPER_EXPERT_RETURNS: dict[str, float] = paper_expert_returns()
+"""The paper's experts' mean returns (under its Tables 1 and 2: data/paper/results.json), the
+targets of ilfo's experts; each card says how far its expert got."""
 
 EXPERT_REWARD_SCALES: dict[str, float] = {
     "MinitaurBulletEnv-v0": 16.0,

@@ -1,0 +1,546 @@
+"""Reports over runs: the paper's final performance per task x algo x demos (mean +- std over
+seeds), rliable's aggregates with bootstrap confidence intervals beside it, the paper's numbers
+beside both, and learning curves and performance profiles as figures.
+
+``collect_runs`` finds runs (sweep directories, run directories, or folders holding either);
+``build_report`` groups them into cells; ``write_report`` writes ``report.md``, ``cells.csv``,
+``aggregates.csv`` and PNG figures.
+
+The final performance of a run is the paper's: its last evaluation (``eval_episodes``
+deterministic fixed-horizon episodes), normalised by the demos' mean return
+(``eval_score_norm``). The std over seeds is the population std (NumPy's default), as the
+paper does not say which it uses.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import warnings
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ilfo.experiments import stats
+from ilfo.experiments.paper import PaperCell, paper_ablation, paper_score
+
+SCORE = "eval_score_norm"
+RETURN = "eval_return_norm"
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """What a report reads of one run."""
+
+    run_dir: Path
+    env: str
+    algo: str
+    num_demos: int
+    seed: int
+    variant: str | None
+    steps: int
+    """The run's budget."""
+    curve_steps: np.ndarray = field(repr=False)
+    curve_scores: np.ndarray = field(repr=False)
+    final_return: float
+    """The last evaluation's standard return (stops at the first fall), normalised."""
+    shipped_demos: bool = True
+    """Whether it imitated the env's shipped expert demos (the only ones the paper's numbers
+    can be compared with)."""
+
+    @property
+    def final_step(self) -> int:
+        return int(self.curve_steps[-1])
+
+    @property
+    def final_score(self) -> float:
+        return float(self.curve_scores[-1])
+
+    @property
+    def finished(self) -> bool:
+        return self.final_step >= self.steps
+
+
+def _is_run_dir(path: Path) -> bool:
+    return (path / "config.json").is_file() and (path / "metrics.csv").is_file()
+
+
+def collect_runs(paths: Iterable[str | Path]) -> tuple[list[RunResult], list[str]]:
+    """The runs under ``paths`` (each a sweep directory, a run directory, or a folder searched
+    for both), and a line for each run left out (no evaluation yet, unreadable)."""
+    from ilfo.experiments.sweep import MANIFEST_FILE, RUNS_DIR, open_sweep
+
+    found: dict[Path, str | None] = {}  # run dir -> variant
+    for given in map(Path, paths):
+        if not given.exists():
+            raise FileNotFoundError(f"{given}: no such sweep or run directory")
+        sweeps = [given] if (given / MANIFEST_FILE).is_file() else []
+        sweeps += [p.parent for p in given.rglob(MANIFEST_FILE) if p.parent != given]
+        for root in sweeps:
+            sweep = open_sweep(root)
+            for run in sweep.runs:
+                if sweep.run_dir(run.name).is_dir():
+                    found.setdefault(sweep.run_dir(run.name).resolve(), run.variant)
+        candidates = [given] if _is_run_dir(given) else []
+        candidates += [p.parent for p in given.rglob("config.json")]
+        for path in candidates:
+            inside_sweep = path.parent.name == RUNS_DIR and (path.parent.parent / MANIFEST_FILE)
+            if _is_run_dir(path) and not (inside_sweep and inside_sweep.is_file()):
+                found.setdefault(path.resolve(), None)
+    runs, skipped = [], []
+    for run_dir, variant in sorted(found.items()):
+        try:
+            result = read_run(run_dir, variant)
+        except (OSError, ValueError, KeyError) as err:
+            skipped.append(f"{run_dir}: unreadable ({err})")
+            continue
+        if result is None:
+            skipped.append(f"{run_dir}: no evaluation with a normalised score yet")
+        else:
+            runs.append(result)
+    return runs, skipped
+
+
+def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | None:
+    """A run's evaluations (None if it has none with a normalised score yet)."""
+    from ilfo.training import read_metrics, read_run_config
+
+    run_dir = Path(run_dir)
+    config = read_run_config(run_dir)
+    rows = [r for r in read_metrics(run_dir) if r.get(SCORE)]
+    if not rows:
+        return None
+    return RunResult(
+        run_dir=run_dir,
+        env=str(config["env"]),
+        algo=str(config["algo"]),
+        num_demos=int(config.get("num_demos", 1)),
+        seed=int(config.get("seed", 0)),
+        variant=variant,
+        steps=int(config["steps"]),
+        curve_steps=np.array([int(r["step"]) for r in rows]),
+        curve_scores=np.array([float(r[SCORE]) for r in rows]),
+        final_return=float(rows[-1][RETURN]) if rows[-1].get(RETURN) else math.nan,
+        shipped_demos=config.get("demos") is None,
+    )
+
+
+CellKey = tuple[str, str, int, "str | None"]
+
+
+@dataclass(frozen=True)
+class Cell:
+    """The runs of one task x algo x demos x variant, with their statistics."""
+
+    env: str
+    algo: str
+    num_demos: int
+    variant: str | None
+    runs: tuple[RunResult, ...]
+    iqm: stats.Interval
+    paper: PaperCell | None
+    """The paper's number for this cell (Tables 1-2; Table 4 for a variant)."""
+
+    @property
+    def key(self) -> CellKey:
+        return (self.env, self.algo, self.num_demos, self.variant)
+
+    @property
+    def scores(self) -> np.ndarray:
+        return np.array([r.final_score for r in self.runs])
+
+    @property
+    def mean(self) -> float:
+        return float(self.scores.mean())
+
+    @property
+    def std(self) -> float:
+        return float(self.scores.std())
+
+    @property
+    def finished(self) -> bool:
+        return all(r.finished for r in self.runs)
+
+    @property
+    def versus_paper(self) -> str:
+        """``within`` / ``above`` / ``below`` the paper's mean +- 2 std, ``other demos`` where
+        runs imitated other demos than the shipped expert's, or empty (no paper number)."""
+        if self.paper is None or self.paper.std is None or self.variant is not None:
+            return ""
+        if not all(r.shipped_demos for r in self.runs):
+            return "other demos"
+        gap = self.mean - self.paper.mean
+        if abs(gap) <= 2 * self.paper.std:
+            return "within"
+        return "above" if gap > 0 else "below"
+
+
+@dataclass(frozen=True)
+class Report:
+    cells: tuple[Cell, ...]
+    skipped: tuple[str, ...]
+    resamples: int
+
+    def cell(self, env: str, algo: str, num_demos: int, variant: str | None = None) -> Cell:
+        for c in self.cells:
+            if c.key == (env, algo, num_demos, variant):
+                return c
+        raise KeyError((env, algo, num_demos, variant))
+
+    def percent_difference(self, cell: Cell) -> float | None:
+        """A variant's mean final score relative to its default (the same task, algo and
+        demos without a variant), in percent, as the paper's Table 4; None without one."""
+        if cell.variant is None:
+            return None
+        try:
+            base = self.cell(cell.env, cell.algo, cell.num_demos)
+        except KeyError:
+            return None
+        return 100 * (cell.mean - base.mean) / abs(base.mean) if base.mean else None
+
+    def groups(self) -> list[tuple[str, int, str | None]]:
+        """(algo, num_demos, variant) in order of appearance."""
+        return list(dict.fromkeys((c.algo, c.num_demos, c.variant) for c in self.cells))
+
+    def task_scores(self, algo: str, num_demos: int, variant: str | None, envs: Sequence[str]):
+        """(runs, tasks) final scores of a group on ``envs`` (NaN for missing runs)."""
+        columns = []
+        for env in envs:
+            try:
+                columns.append(self.cell(env, algo, num_demos, variant).scores)
+            except KeyError:
+                columns.append(np.array([]))
+        width = max([c.size for c in columns] + [1])
+        out = np.full((width, len(envs)), np.nan)
+        for t, column in enumerate(columns):
+            out[: column.size, t] = column
+        return out
+
+    def envs_of(self, algo: str, num_demos: int, variant: str | None) -> list[str]:
+        return [
+            c.env
+            for c in self.cells
+            if (c.algo, c.num_demos, c.variant) == (algo, num_demos, variant)
+        ]
+
+
+def build_report(
+    runs: Sequence[RunResult],
+    *,
+    skipped: Sequence[str] = (),
+    resamples: int = 2000,
+    seed: int = 0,
+) -> Report:
+    """Group runs into cells and compute each cell's statistics (``skipped``: the lines of
+    runs left out, for the report to list)."""
+    grouped: dict[CellKey, list[RunResult]] = {}
+    for run in runs:
+        grouped.setdefault((run.env, run.algo, run.num_demos, run.variant), []).append(run)
+    cells = []
+    for (env, algo, num_demos, variant), members in grouped.items():
+        members.sort(key=lambda r: r.seed)
+        seeds = [r.seed for r in members]
+        if len(set(seeds)) != len(seeds):
+            warnings.warn(
+                f"{env} {algo} demos {num_demos}{f' {variant}' if variant else ''}: seeds "
+                f"{seeds} repeat (the same runs found twice?); each counts",
+                stacklevel=2,
+            )
+        scores = np.array([r.final_score for r in members])
+        interval = stats.stratified_bootstrap(scores, stats.iqm, resamples=resamples, seed=seed)
+        paper = (
+            paper_score(env, algo, num_demos)
+            if variant is None
+            else (paper_ablation(env, variant) if algo == "oops-td3" else None)
+        )
+        cells.append(Cell(env, algo, num_demos, variant, tuple(members), interval, paper))
+    order = {env: k for k, env in enumerate(dict.fromkeys(r.env for r in runs))}
+    cells.sort(key=lambda c: (order[c.env], c.num_demos, c.algo, c.variant or ""))
+    return Report(tuple(cells), tuple(skipped), resamples)
+
+
+# -------------------------------------------------------------------------------- writing
+def _fmt(value: float | None, digits: int = 2) -> str:
+    return "" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
+
+
+def _label(algo: str, num_demos: int, variant: str | None) -> str:
+    return f"{algo}{f' [{variant}]' if variant else ''}, {num_demos} demo{'s' * (num_demos > 1)}"
+
+
+def _seeds_text(cell: Cell) -> str:
+    unfinished = [r for r in cell.runs if not r.finished]
+    text = str(len(cell.runs))
+    if unfinished:
+        least = min(r.final_step for r in unfinished)
+        text += f" ({len(unfinished)} unfinished, from step {least:,})"
+    return text
+
+
+def aggregate_rows(report: Report) -> list[dict[str, object]]:
+    """Per algo x demos x variant: IQM, mean and median over all its tasks' runs, each with a
+    95% stratified-bootstrap interval."""
+    rows = []
+    for algo, num_demos, variant in report.groups():
+        envs = report.envs_of(algo, num_demos, variant)
+        scores = report.task_scores(algo, num_demos, variant, envs)
+        row: dict[str, object] = {
+            "algo": algo,
+            "num_demos": num_demos,
+            "variant": variant or "",
+            "tasks": len(envs),
+            "runs": int(np.isfinite(scores).sum()),
+        }
+        for name, aggregate in (("iqm", stats.iqm), ("mean", stats.mean), ("median", stats.median)):
+            interval = stats.stratified_bootstrap(
+                scores, aggregate, resamples=report.resamples, seed=0
+            )
+            row[name], row[f"{name}_low"], row[f"{name}_high"] = (
+                interval.value,
+                interval.low,
+                interval.high,
+            )
+        rows.append(row)
+    return rows
+
+
+def improvement_rows(report: Report) -> list[dict[str, object]]:
+    """P(X > Y) for each pair of algos (no variant) with the same demos, on their shared
+    tasks, with a 95% stratified-bootstrap interval."""
+    rows = []
+    groups = [g for g in report.groups() if g[2] is None]
+    for x_algo, demos, _ in groups:
+        for y_algo, y_demos, _ in groups:
+            if y_demos != demos or y_algo == x_algo:
+                continue
+            shared = [
+                e
+                for e in report.envs_of(x_algo, demos, None)
+                if e in report.envs_of(y_algo, demos, None)
+            ]
+            if not shared:
+                continue
+            interval = stats.probability_of_improvement_interval(
+                report.task_scores(x_algo, demos, None, shared),
+                report.task_scores(y_algo, demos, None, shared),
+                resamples=report.resamples,
+            )
+            rows.append(
+                {
+                    "x": x_algo,
+                    "y": y_algo,
+                    "num_demos": demos,
+                    "tasks": len(shared),
+                    "p": interval.value,
+                    "p_low": interval.low,
+                    "p_high": interval.high,
+                }
+            )
+    return rows
+
+
+def cell_rows(report: Report) -> list[dict[str, object]]:
+    """One row per cell: ilfo's statistics beside the paper's number."""
+    rows = []
+    for c in report.cells:
+        rows.append(
+            {
+                "env": c.env,
+                "algo": c.algo,
+                "num_demos": c.num_demos,
+                "variant": c.variant or "",
+                "seeds": len(c.runs),
+                "finished": c.finished,
+                "final_step_min": min(r.final_step for r in c.runs),
+                "mean": c.mean,
+                "std": c.std,
+                "iqm": c.iqm.value,
+                "iqm_low": c.iqm.low,
+                "iqm_high": c.iqm.high,
+                "return_norm_mean": float(np.nanmean([r.final_return for r in c.runs]))
+                if any(math.isfinite(r.final_return) for r in c.runs)
+                else math.nan,
+                "percent_difference": report.percent_difference(c),
+                "paper_mean": None if c.paper is None else c.paper.mean,
+                "paper_std": None if c.paper is None else c.paper.std,
+                "paper_source": "" if c.paper is None else c.paper.where,
+                "versus_paper": c.versus_paper,
+                "seeds_list": " ".join(str(r.seed) for r in c.runs),
+            }
+        )
+    return rows
+
+
+def write_report(report: Report, out: str | Path, *, sources: Sequence[str] = ()) -> list[Path]:
+    """Write ``report.md``, ``cells.csv``, ``aggregates.csv``, ``improvement.csv`` and the
+    figures (``curves_<env>.png``, ``profile_<demos>demos.png``) to ``out``; returns them."""
+    from datetime import date
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    cells, aggregates, improvements = (
+        cell_rows(report),
+        aggregate_rows(report),
+        improvement_rows(report),
+    )
+    for name, rows in (("cells", cells), ("aggregates", aggregates), ("improvement", improvements)):
+        path = out / f"{name}.csv"
+        with path.open("w", newline="") as f:
+            if rows:
+                writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+                writer.writeheader()
+                writer.writerows(rows)
+        written.append(path)
+    figures = _plot_curves(report, out) + _plot_profiles(report, out)
+    lines = [
+        "# ilfo report",
+        "",
+        f"{sum(len(c.runs) for c in report.cells)} runs in {len(report.cells)} cells"
+        + (f", from {', '.join(sources)}" if sources else "")
+        + f"; written {date.today().isoformat()}. Final performance = the last evaluation's "
+        "fixed-horizon score normalised by the demos' mean return (the paper's); mean +- std "
+        f"over seeds (population std); IQM with a 95% stratified-bootstrap interval "
+        f"({report.resamples} resamples, percentile). `vs paper`: within, above or below the "
+        "paper's mean +- 2 std (Tables 1-2).",
+        "",
+        "## Final performance",
+        "",
+        "| task | algo | demos | variant | seeds | mean ± std | IQM [95% CI] | return (norm.) "
+        "| paper | vs paper |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for c, row in zip(report.cells, cells, strict=True):
+        paper = "" if c.paper is None or c.variant else c.paper.text
+        lines.append(
+            f"| {c.env} | {c.algo} | {c.num_demos} | {c.variant or ''} | {_seeds_text(c)} | "
+            f"{_fmt(c.mean)} ± {_fmt(c.std)} | {c.iqm} | {_fmt(row['return_norm_mean'])} | "
+            f"{paper} | {c.versus_paper} |"
+        )
+    variants = [(c, report.percent_difference(c)) for c in report.cells if c.variant]
+    if variants:
+        lines += [
+            "",
+            "## Variants (percent difference of the mean from the default run, as Table 4)",
+            "",
+            "| task | algo | demos | variant | ilfo % | paper % (10 demos) |",
+            "|---|---|---|---|---|---|",
+        ]
+        for c, diff in variants:
+            paper = "" if c.paper is None else c.paper.text
+            lines.append(
+                f"| {c.env} | {c.algo} | {c.num_demos} | {c.variant} | {_fmt(diff, 1)} | {paper} |"
+            )
+    lines += [
+        "",
+        "## Aggregates over tasks",
+        "",
+        "| algo | demos | variant | tasks | runs | IQM [95% CI] | mean [95% CI] "
+        "| median [95% CI] |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in aggregates:
+        cis = " | ".join(
+            f"{_fmt(r[k])} [{_fmt(r[f'{k}_low'])}, {_fmt(r[f'{k}_high'])}]"
+            for k in ("iqm", "mean", "median")
+        )
+        lines.append(
+            f"| {r['algo']} | {r['num_demos']} | {r['variant']} | {r['tasks']} | {r['runs']} "
+            f"| {cis} |"
+        )
+    if improvements:
+        lines += [
+            "",
+            "## Probability of improvement",
+            "",
+            "| X | Y | demos | tasks | P(X > Y) [95% CI] |",
+            "|---|---|---|---|---|",
+        ]
+        for r in improvements:
+            lines.append(
+                f"| {r['x']} | {r['y']} | {r['num_demos']} | {r['tasks']} | "
+                f"{_fmt(r['p'])} [{_fmt(r['p_low'])}, {_fmt(r['p_high'])}] |"
+            )
+    if report.skipped:
+        lines += ["", "## Left out", ""] + [f"- {s}" for s in report.skipped]
+    if figures:
+        lines += ["", "## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figures]
+    path = out / "report.md"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return [path, *written, *figures]
+
+
+def _curve_band(run_results: Sequence[RunResult], resamples: int):
+    """Common steps, the mean over seeds and its pointwise 95% bootstrap band."""
+    last = min(r.final_step for r in run_results)
+    steps = run_results[0].curve_steps[run_results[0].curve_steps <= last]
+    values = np.stack([np.interp(steps, r.curve_steps, r.curve_scores) for r in run_results])
+    mean = values.mean(axis=0)
+    if len(run_results) < 2:
+        return steps, mean, mean, mean
+    rng = np.random.default_rng(0)
+    picks = rng.integers(0, len(run_results), size=(resamples, len(run_results)))
+    means = values[picks].mean(axis=1)
+    low, high = np.percentile(means, [2.5, 97.5], axis=0)
+    return steps, mean, low, high
+
+
+def _plot_curves(report: Report, out: Path) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figures = []
+    for env in dict.fromkeys(c.env for c in report.cells):
+        fig, ax = plt.subplots(figsize=(6, 4))
+        for c in (c for c in report.cells if c.env == env):
+            steps, mean, low, high = _curve_band(c.runs, min(report.resamples, 1000))
+            label = f"{_label(c.algo, c.num_demos, c.variant)} ({len(c.runs)} seeds)"
+            ax.plot(steps, mean, label=label)
+            ax.fill_between(steps, low, high, alpha=0.2)
+        ax.set_title(f"{env}: mean over seeds, 95% bootstrap band")
+        ax.set_xlabel("environment steps")
+        ax.set_ylabel("normalised score")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        path = out / f"curves_{env}.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        figures.append(path)
+    return figures
+
+
+def _plot_profiles(report: Report, out: Path) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figures = []
+    taus = np.linspace(0.0, 1.25, 101)
+    for demos in sorted({c.num_demos for c in report.cells}):
+        groups = [g for g in report.groups() if g[1] == demos]
+        fig, ax = plt.subplots(figsize=(6, 4))
+        for algo, _, variant in groups:
+            envs = report.envs_of(algo, demos, variant)
+            scores = report.task_scores(algo, demos, variant, envs)
+            profile, low, high = stats.performance_profile_band(
+                scores, taus, resamples=min(report.resamples, 1000)
+            )
+            ax.plot(taus, profile, label=f"{_label(algo, demos, variant)} ({len(envs)} tasks)")
+            ax.fill_between(taus, low, high, alpha=0.2)
+        ax.set_title(f"Performance profile, {demos} demo{'s' * (demos > 1)}")
+        ax.set_xlabel("normalised score tau")
+        ax.set_ylabel("fraction of runs with score > tau")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        path = out / f"profile_{demos}demos.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        figures.append(path)
+    return figures

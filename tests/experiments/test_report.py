@@ -1,0 +1,167 @@
+"""Reports: the statistics against SciPy and hand computations, and a report over a fixture of
+metrics files against hand-computed aggregates and the paper's numbers."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+from scipy import stats as scipy_stats
+
+from ilfo.experiments import stats
+from ilfo.experiments.paper import paper_ablation, paper_cells, paper_score
+from ilfo.experiments.report import build_report, collect_runs, write_report
+
+
+def test_iqm_against_hand_and_scipy():
+    assert stats.iqm(np.arange(1, 9)) == pytest.approx(4.5)  # mean of 3, 4, 5, 6
+    x = np.random.default_rng(1).normal(size=(7, 3))
+    assert stats.iqm(x) == pytest.approx(scipy_stats.trim_mean(x.ravel(), 0.25))
+    with_nan = np.vstack([x, np.full((1, 3), np.nan)])
+    assert stats.iqm(with_nan) == pytest.approx(stats.iqm(x))
+
+
+def test_bootstrap_interval_matches_scipy_on_one_task():
+    x = np.random.default_rng(2).normal(1.0, 0.5, size=30)
+    ours = stats.stratified_bootstrap(x, stats.iqm, resamples=20000, seed=0)
+    ref = scipy_stats.bootstrap(
+        (x,),
+        lambda s, axis: scipy_stats.trim_mean(s, 0.25, axis=axis),
+        n_resamples=20000,
+        method="percentile",
+        random_state=np.random.default_rng(5),
+    ).confidence_interval
+    assert ours.value == pytest.approx(scipy_stats.trim_mean(x, 0.25))
+    assert ours.low == pytest.approx(ref.low, abs=0.02)
+    assert ours.high == pytest.approx(ref.high, abs=0.02)
+    assert ours.low < ours.value < ours.high
+    custom = stats.stratified_bootstrap(x, lambda s: float(np.nanmean(s)), resamples=2000)
+    plain = stats.stratified_bootstrap(x, stats.mean, resamples=2000)
+    assert (custom.low, custom.high) == pytest.approx((plain.low, plain.high))  # same draws
+
+
+def test_bootstrap_is_stratified_by_task():
+    """Task A's runs are all 0, task B's all 1 (different counts, NaN padding): resampling each
+    task from its own runs keeps the pooled mean at 5/8 in every sample; pooling the runs first
+    would not."""
+    scores = np.full((5, 2), np.nan)
+    scores[:3, 0] = 0.0
+    scores[:, 1] = 1.0
+    interval = stats.stratified_bootstrap(scores, stats.mean, resamples=500)
+    assert (interval.value, interval.low, interval.high) == pytest.approx((5 / 8,) * 3)
+
+
+def test_profile_and_probability_of_improvement_by_hand():
+    assert stats.performance_profile([0.1, 0.5, 0.9], [0.0, 0.5, 1.0]) == pytest.approx(
+        [1.0, 1 / 3, 0.0]
+    )
+    x, y = np.array([1.0, 2.0]), np.array([2.0, 0.0])
+    assert stats.probability_of_improvement(x, y) == pytest.approx((2 + 0.5) / 4)
+    rng = np.random.default_rng(3)
+    a, b = rng.normal(size=(6, 2)), rng.normal(0.5, size=(4, 2))
+    u = [scipy_stats.mannwhitneyu(a[:, t], b[:, t]).statistic / (6 * 4) for t in range(2)]
+    assert stats.probability_of_improvement(a, b) == pytest.approx(np.mean(u))
+    interval = stats.probability_of_improvement_interval(a, b, resamples=500)
+    assert 0 <= interval.low <= interval.value <= interval.high <= 1
+    profile, low, high = stats.performance_profile_band(a, np.array([0.0]), resamples=200)
+    assert low[0] <= profile[0] <= high[0]
+
+
+def test_paper_data_has_the_tables():
+    tables = {c.table for c in paper_cells()}
+    assert tables == {"table1", "table2", "table3", "table4"}
+    hopper = paper_score("Hopper-v5", "oops-td3", 1)
+    assert (hopper.mean, hopper.std) == (0.98, 0.02)
+    assert paper_score("Walker2d-v5", "opolo", 1).mean == 0.80
+    assert paper_score("Hopper-v5", "firl-fkl", 1).mean == 0.91
+    assert paper_ablation("Hopper-v5", "lambda_0.1") is not None
+
+
+def _fake_run(root, name, *, env, algo, seed, scores, steps=None, demos=None, num_demos=1):
+    run = root / name
+    run.mkdir(parents=True)
+    n = len(scores)
+    config = {"env": env, "algo": algo, "seed": seed, "num_demos": num_demos,
+              "steps": steps or 1000 * n, "demos": demos}  # fmt: skip
+    (run / "config.json").write_text(json.dumps(config))
+    with (run / "metrics.csv").open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["step", "episode", "eval_score_norm", "eval_return_norm"])
+        for k, score in enumerate(scores):
+            writer.writerow([1000 * (k + 1) - 500, 2 * k + 1, "", ""])  # an episode row
+            writer.writerow([1000 * (k + 1), 2 * k + 2, score, score / 2])
+    return run
+
+
+def test_report_over_a_fixture_against_hand_computations(tmp_path):
+    finals = {0: 0.9, 1: 1.0, 2: 0.5}
+    for seed, final in finals.items():
+        _fake_run(tmp_path, f"h{seed}", env="Hopper-v5", algo="oops-td3", seed=seed,
+                  scores=[0.1, 0.5, final])  # fmt: skip
+    for seed, final in {0: 0.2, 1: 0.4}.items():
+        _fake_run(tmp_path, f"p{seed}", env="Hopper-v5", algo="pwil-td3", seed=seed,
+                  scores=[0.1, final])  # fmt: skip
+    _fake_run(tmp_path, "w0", env="Walker2d-v5", algo="oops-td3", seed=0, scores=[0.95],
+              steps=2000)  # unfinished: half its steps  # fmt: skip
+    _fake_run(tmp_path, "own", env="Hopper-v5", algo="oops-td3", seed=0, scores=[0.5],
+              demos="mine.npz", num_demos=4)  # fmt: skip
+    (tmp_path / "noeval").mkdir()
+    (tmp_path / "noeval" / "config.json").write_text(json.dumps({"env": "Hopper-v5"}))
+    (tmp_path / "noeval" / "metrics.csv").write_text("step,eval_score_norm\n500,\n")
+    runs, skipped = collect_runs([tmp_path])
+    assert len(runs) == 7 and len(skipped) == 1 and "no evaluation" in skipped[0]
+    report = build_report(runs, skipped=skipped, resamples=500)
+    hopper = report.cell("Hopper-v5", "oops-td3", 1)
+    values = np.array(list(finals.values()))
+    assert hopper.mean == pytest.approx(values.mean())
+    assert hopper.std == pytest.approx(values.std())
+    assert hopper.iqm.value == pytest.approx(scipy_stats.trim_mean(values, 0.25))
+    assert hopper.paper.mean == 0.98
+    assert hopper.versus_paper == "below"  # 0.8 < 0.98 - 2 * 0.02
+    pwil = report.cell("Hopper-v5", "pwil-td3", 1)
+    assert pwil.mean == pytest.approx(0.3)
+    walker = report.cell("Walker2d-v5", "oops-td3", 1)
+    assert not walker.finished and walker.versus_paper == "within"  # 0.95 +- 2 * 0.03
+    assert report.cell("Hopper-v5", "oops-td3", 4).versus_paper == "other demos"
+    out = write_report(report, tmp_path / "report", sources=[str(tmp_path)])
+    assert {p.name for p in out} >= {"report.md", "cells.csv", "curves_Hopper-v5.png"}
+    rows = list(csv.DictReader((tmp_path / "report" / "cells.csv").open()))
+    row = next(r for r in rows if r["algo"] == "oops-td3" and r["env"] == "Hopper-v5"
+               and r["num_demos"] == "1")  # fmt: skip
+    assert float(row["mean"]) == pytest.approx(0.8) and row["versus_paper"] == "below"
+    assert float(row["return_norm_mean"]) == pytest.approx(0.4)
+    aggregates = list(csv.DictReader((tmp_path / "report" / "aggregates.csv").open()))
+    both = next(r for r in aggregates if r["algo"] == "oops-td3" and r["num_demos"] == "1")
+    pooled = np.array([0.9, 1.0, 0.5, 0.95])  # Hopper's three seeds and Walker2d's one
+    assert int(both["tasks"]) == 2 and int(both["runs"]) == 4
+    assert float(both["mean"]) == pytest.approx(pooled.mean())
+    assert float(both["iqm"]) == pytest.approx(scipy_stats.trim_mean(pooled, 0.25))
+    improvement = list(csv.DictReader((tmp_path / "report" / "improvement.csv").open()))
+    first = next(r for r in improvement if (r["x"], r["y"]) == ("oops-td3", "pwil-td3"))
+    assert int(first["tasks"]) == 1 and float(first["p"]) == pytest.approx(1.0)
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "0.98 ± 0.02" in text and "1 unfinished" in text and "no evaluation" in text
+
+
+def test_report_reads_sweep_variants_and_percent_differences(tmp_path):
+    from ilfo.experiments import SweepSpec, create_sweep
+
+    spec = SweepSpec(config={"steps": 2000}, variants={"lambda_0.1": {"oops": {"reg": 0.1}}})
+    base_spec = SweepSpec(config={"steps": 2000})
+    sweep = create_sweep(tmp_path / "ablation", spec)
+    base = create_sweep(tmp_path / "base", base_spec)
+    (run,) = sweep.runs
+    _fake_run(sweep.root / "runs", run.name, env="Hopper-v5", algo="oops-td3", seed=0,
+              scores=[0.4, 0.6])  # fmt: skip
+    _fake_run(base.root / "runs", base.runs[0].name, env="Hopper-v5", algo="oops-td3", seed=0,
+              scores=[0.4, 0.8])  # fmt: skip
+    runs, _ = collect_runs([tmp_path])
+    assert sorted((r.variant or "") for r in runs) == ["", "lambda_0.1"]
+    report = build_report(runs, resamples=200)
+    variant = report.cell("Hopper-v5", "oops-td3", 1, "lambda_0.1")
+    assert report.percent_difference(variant) == pytest.approx(100 * (0.6 - 0.8) / 0.8)
+    assert variant.paper == paper_ablation("Hopper-v5", "lambda_0.1")
+    with pytest.raises(FileNotFoundError):
+        collect_runs([tmp_path / "missing"])
