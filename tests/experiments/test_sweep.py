@@ -268,3 +268,21 @@ def test_killed_sweep_restarted_finishes_each_run_exactly_once(tmp_path):
         capture_output=True, text=True, check=True,
     )  # fmt: skip
     assert [json.loads(line)["state"] for line in status.stdout.splitlines()] == ["done"] * 2
+
+
+@pytest.mark.slow
+def test_ray_backend_runs_a_tiny_sweep(tmp_path):
+    """A local Ray instance (2 CPUs) runs the sweep's runs as tasks, each one thread."""
+    ray = pytest.importorskip("ray")
+    from ilfo.experiments import RayBackend
+
+    sweep = create_sweep(tmp_path, SweepSpec(algo=("oops-td3", "pwil-td3"), config=TINY))
+    backend = RayBackend(num_cpus=2, cores_per_run=1)
+    assert backend.slots == 2
+    final = run_sweep(sweep, backend, poll_seconds=0.5)
+    assert [s.state for s in final] == ["done", "done"]
+    assert not ray.is_initialized()  # the backend shut down the instance it started
+    for run in sweep.runs:
+        starts = [e for e in read_attempts(sweep, run.name) if e["event"] == "start"]
+        assert len(starts) == 1 and starts[0]["threads"]["OPENBLAS_NUM_THREADS"] == "1"
+        assert "intra_op_parallelism_threads=1" in starts[0]["threads"]["XLA_FLAGS"]

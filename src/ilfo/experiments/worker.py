@@ -25,15 +25,22 @@ a killed sweep leaves no orphan runs behind, each checkpointed where it stood.""
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
-def thread_environment(threads: int, cpus: Sequence[int] | None = None) -> dict[str, str]:
-    """The environment variables that hold a run to ``threads`` threads (and to ``cpus``, where
-    given): BLAS and OpenMP pools of that size, so that runs side by side do not oversubscribe
-    the cores (OpenBLAS slows 10-20x under contention: docs/benchmarks.md)."""
+def thread_environment(
+    threads: int, cpus: Sequence[int] | None = None, environ: Mapping[str, str] = os.environ
+) -> dict[str, str]:
+    """The environment variables that hold a run to ``threads`` threads: BLAS and OpenMP pools
+    of that size, so that runs side by side do not oversubscribe the cores (OpenBLAS slows
+    10-20x under contention: docs/benchmarks.md), and ``cpus`` to pin it to, where given (XLA
+    sizes its pools by them). Without CPUs to pin to (Ray places runs, not threads), a
+    one-thread run also gets XLA's single-threaded CPU code, added to any ``XLA_FLAGS``."""
     if threads < 1:
         raise ValueError(f"threads must be >= 1, got {threads}")
     env = dict.fromkeys(THREAD_VARIABLES, str(threads))
     if cpus is not None:
         env[CPUS_ENV] = ",".join(str(c) for c in cpus)
+    elif threads == 1:
+        flags = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+        env["XLA_FLAGS"] = f"{environ.get('XLA_FLAGS', '')} {flags}".strip()
     return env
 
 
@@ -71,7 +78,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     sweep = open_sweep(args[0])
     run = sweep.run(args[1])
-    threads = {name: os.environ.get(name) for name in THREAD_VARIABLES}
+    threads = {name: os.environ.get(name) for name in (*THREAD_VARIABLES, "XLA_FLAGS")}
     record_attempt(sweep, run.name, "start", pid=os.getpid(), cpus=cpus, threads=threads)
     try:
         if run_status(sweep, run).state != "done":
