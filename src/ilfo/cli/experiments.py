@@ -52,24 +52,7 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="forget the failures of runs that were given up, so that they run again",
     )
-    run.add_argument("--backend", choices=["local", "ray"], default="local")
-    run.add_argument(
-        "--cores-per-run",
-        type=int,
-        default=1,
-        help="CPUs (and BLAS/XLA threads) of each run (default 1: one run per core)",
-    )
-    run.add_argument(
-        "--workers",
-        type=int,
-        default=None,
-        help="local backend: runs at once (default: cores / --cores-per-run)",
-    )
-    run.add_argument(
-        "--address",
-        default=None,
-        help="Ray backend: the cluster ('auto' or HOST:PORT); default: a local Ray instance",
-    )
+    _add_backend_arguments(run)
     run.add_argument("--dry-run", action="store_true", help="list the runs and stop")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.set_defaults(run=_run_sweep, takes_train_flags=True)
@@ -128,8 +111,6 @@ def _spec_from_args(args: argparse.Namespace, rest: list[str]) -> Any:
 
 def _run_sweep(args: argparse.Namespace) -> int:
     from ilfo.experiments import (
-        LocalBackend,
-        RayBackend,
         create_sweep,
         open_sweep,
         progress_line,
@@ -159,12 +140,7 @@ def _run_sweep(args: argparse.Namespace) -> int:
         for status in statuses:
             if status.state == "failed":
                 record_attempt(sweep, status.name, "reset")
-    if args.backend == "ray":
-        backend: Any = RayBackend(args.address, cores_per_run=args.cores_per_run)
-    else:
-        if args.address is not None:
-            raise ValueError("--address is for --backend ray")
-        backend = LocalBackend(args.cores_per_run, args.workers)
+    backend = _backend_factory(args)()
     print(f"sweep {root}: {len(sweep.runs)} runs, {backend.slots} at once ({args.backend})")
     print(progress_line(statuses))
     display = _Progress(statuses, enabled=not args.no_progress)
@@ -200,6 +176,7 @@ class _Progress:
         from ilfo.experiments import summary
 
         counts = summary(statuses)
+        self._bar.total = counts["steps_total"]
         self._bar.n = counts["steps_done"]
         self._bar.set_postfix_str(
             f"done {counts['done']} running {counts['running']} failed {counts['failed']} "
@@ -267,4 +244,80 @@ def _run_report(args: argparse.Namespace) -> int:
     report = build_report(runs, skipped=skipped, resamples=args.resamples)
     written = write_report(report, args.out, sources=args.paths)
     print(f"{len(runs)} runs, {len(report.cells)} cells; wrote {', '.join(map(str, written))}")
+    return 0
+
+
+def _add_backend_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--backend", choices=["local", "ray"], default="local")
+    p.add_argument(
+        "--cores-per-run",
+        type=int,
+        default=1,
+        help="CPUs (and BLAS/XLA threads) of each run (default 1: one run per core)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="local backend: runs at once (default: cores / --cores-per-run)",
+    )
+    p.add_argument(
+        "--address",
+        default=None,
+        help="Ray backend: the cluster ('auto' or HOST:PORT); default: a local Ray instance",
+    )
+
+
+def _backend_factory(args: argparse.Namespace) -> Any:
+    """A function making the backend the flags ask for (checked now, made per sweep)."""
+    from ilfo.experiments import LocalBackend, RayBackend
+
+    if args.backend == "ray":
+        return lambda: RayBackend(args.address, cores_per_run=args.cores_per_run)
+    if args.address is not None:
+        raise ValueError("--address is for --backend ray")
+    LocalBackend(args.cores_per_run, args.workers)  # bad numbers fail before any run starts
+    return lambda: LocalBackend(args.cores_per_run, args.workers)
+
+
+def _add_reproduce_parser(sub: argparse._SubParsersAction) -> None:
+    from ilfo.experiments.reproduce import BUDGETS, EXPERIMENTS
+
+    p = sub.add_parser(
+        "reproduce",
+        help="Run one of the paper's experiments (tables) at a budget, and report on it.",
+        description=(
+            "Run the sweeps of one of the paper's experiments and write the report beside the "
+            "paper's numbers. Budgets: smoke (minutes, tiny runs: proves the pipeline), small "
+            "(about a day on 2 cores: fewer tasks, seeds and steps), full (the paper's "
+            "protocol). Prints the plan and its estimated core-hours first; resumable: run the "
+            "same command again to continue."
+        ),
+    )
+    p.add_argument("name", choices=list(EXPERIMENTS), help="the experiment")
+    p.add_argument("--budget", choices=list(BUDGETS), default="smoke")
+    p.add_argument(
+        "--dir", default=None, help="where its sweeps and report go (default reproduce/NAME-BUDGET)"
+    )
+    _add_backend_arguments(p)
+    p.add_argument("--dry-run", action="store_true", help="print the plan and stop")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(run=_run_reproduce)
+
+
+def _run_reproduce(args: argparse.Namespace) -> int:
+    from ilfo.experiments.reproduce import plan, reproduce
+
+    the_plan = plan(args.name, args.budget)
+    print(the_plan.describe())
+    if args.dry_run:
+        return 0
+    root = Path(args.dir or f"reproduce/{args.name}-{args.budget}")
+    factory = _backend_factory(args)
+    display = _Progress([], enabled=not args.no_progress)
+    try:
+        _, written = reproduce(args.name, args.budget, root, factory, on_change=display.update)
+    finally:
+        display.close()
+    print(f"report: {written[0]}")
     return 0

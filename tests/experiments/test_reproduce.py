@@ -1,0 +1,59 @@
+"""`ilfo reproduce`: every experiment plans at every budget, its variants are the paper's, and
+table1's smoke budget runs end to end into a report."""
+
+from __future__ import annotations
+
+import csv
+
+import pytest
+
+from ilfo.algos import ALGOS
+from ilfo.cli import main
+from ilfo.experiments.paper import paper_cells
+from ilfo.experiments.reproduce import ABLATIONS, BUDGETS, EXPERIMENTS, TABLE1_ALGOS, plan
+
+
+@pytest.mark.parametrize("name", list(EXPERIMENTS))
+@pytest.mark.parametrize("budget", BUDGETS)
+def test_every_experiment_plans(name, budget):
+    the_plan = plan(name, budget)
+    assert the_plan.runs > 0 and the_plan.core_hours() > 0
+    for spec in the_plan.sweeps.values():
+        assert all(algo in ALGOS for algo in spec.algo)
+    text = the_plan.describe()
+    assert "estimated" in text and name in text
+
+
+def test_plans_leave_out_what_is_not_built_and_follow_the_paper():
+    table1 = plan("table1", "full")
+    (spec,) = table1.sweeps.values()
+    assert set(spec.algo) == {a for a in TABLE1_ALGOS if a in ALGOS}
+    assert spec.num_demos == (1, 4, 10) and len(spec.seed) == 5
+    assert spec.config["steps"] == 1_000_000
+    missing = [a for a in TABLE1_ALGOS if a not in ALGOS]
+    assert all(any(a in line for line in table1.left_out) for a in missing)
+    paper_variants = {c.variant for c in paper_cells() if c.table == "table4"}
+    assert set(ABLATIONS) == paper_variants
+    table4 = plan("table4", "full")
+    assert set(table4.sweeps["variants"].variants) == {k for k, v in ABLATIONS.items() if v}
+    with pytest.raises(ValueError, match="unknown experiment"):
+        plan("table9", "small")
+    with pytest.raises(ValueError, match="budget"):
+        plan("table1", "huge")
+
+
+def test_table1_smoke_runs_into_a_report(tmp_path, capsys):
+    root = tmp_path / "t1"
+    assert main(["reproduce", "table1", "--budget", "smoke", "--dir", str(root),
+                 "--no-progress"]) == 0  # fmt: skip
+    out = capsys.readouterr().out
+    assert "estimated" in out and "report:" in out
+    rows = list(csv.DictReader((root / "report" / "cells.csv").open()))
+    (spec,) = plan("table1", "smoke").sweeps.values()
+    assert sorted(r["algo"] for r in rows) == sorted(spec.algo)
+    assert all(r["finished"] == "True" and r["versus_paper"] == "other demos" for r in rows)
+    text = (root / "report" / "report.md").read_text()
+    assert all(f"{a}: not built yet" in text for a in TABLE1_ALGOS if a not in ALGOS)
+    # Run again: everything is done, nothing trains, the report is rewritten.
+    assert main(["reproduce", "table1", "--budget", "smoke", "--dir", str(root),
+                 "--no-progress"]) == 0  # fmt: skip
