@@ -7,7 +7,6 @@ from typing import Any
 
 import numpy as np
 
-from ilfo.envs import make_env
 from ilfo.training import load_demo_set, load_run_policy, score_policy
 
 
@@ -24,13 +23,7 @@ def evaluate_run(
     run = load_run_policy(run_dir, "best" if best else "final")
     config, horizon = run.config, run.env.horizon
     demos = load_demo_set(config, run.env.obs_dim)
-    env = make_env(
-        config.env,
-        True,
-        horizon=horizon,
-        render_mode="rgb_array" if video else None,
-        healthy_angle_range=config.healthy_angle_range,  # as the run's evaluations
-    )
+    env = run.eval_env(render_mode="rgb_array" if video else None)
     if video:
         _check_rendering(env)
     scored = score_policy(

@@ -54,6 +54,12 @@ def test_table1_smoke_runs_into_a_report(tmp_path, capsys):
     assert all(r["finished"] == "True" and r["versus_paper"] == "other demos" for r in rows)
     text = (root / "report" / "report.md").read_text()
     assert all(f"{a}: not built yet" in text for a in TABLE1_ALGOS if a not in ALGOS)
+    # Table 3's distances of one of these runs: 10 rollouts against 10 expert trajectories.
+    from ilfo.experiments.distances import SPACES, run_distances
+
+    run_dir = next((root / "table1" / "runs").glob("Hopper-v5__oops-td3__*"))
+    values = run_distances(run_dir, episodes=2, experts=2)
+    assert set(values) == set(SPACES) and all(v > 0 for v in values.values())
     # Run again: everything is done, nothing trains, the report is rewritten.
     assert main(["reproduce", "table1", "--budget", "smoke", "--dir", str(root),
                  "--no-progress"]) == 0  # fmt: skip

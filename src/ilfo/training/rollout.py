@@ -45,12 +45,13 @@ def policy_actions(agent: Agent, policy: Any, observations: np.ndarray, horizon:
 
 class Rollout(NamedTuple):
     """One evaluation episode: observations (T + 1, d), task rewards (T,), terminations (T,),
-    and rendered frames (empty unless asked for)."""
+    rendered frames (empty unless asked for) and the actions taken (T, a)."""
 
     observations: np.ndarray
     rewards: np.ndarray
     env_terminated: np.ndarray
     frames: list[np.ndarray]
+    actions: np.ndarray
 
 
 def rollout_policy(
@@ -69,7 +70,7 @@ def rollout_policy(
 
     policy = policy_of(state)
     obs, _ = env.reset(seed=seed)
-    observations, rewards, terminated_flags = [obs], [], []
+    observations, rewards, terminated_flags, actions = [obs], [], [], []
     frames = []
     step_keys = None if key is None else np.asarray(jax.random.split(key, horizon))
     for t in range(horizon):
@@ -79,6 +80,7 @@ def rollout_policy(
         else:
             action = np.asarray(agent.functions.act(policy, agent_obs, step_keys[t]))
         obs, reward, terminated, truncated, info = env.step(action.astype(np.float64))
+        actions.append(action)
         if render:
             frames.append(env.render())
         observations.append(obs)
@@ -87,7 +89,11 @@ def rollout_policy(
         if terminated or truncated:
             break
     return Rollout(
-        np.asarray(observations), np.asarray(rewards), np.asarray(terminated_flags), frames
+        np.asarray(observations),
+        np.asarray(rewards),
+        np.asarray(terminated_flags),
+        frames,
+        np.asarray(actions, dtype=np.float32).reshape(len(actions), -1),
     )
 
 

@@ -197,6 +197,19 @@ class RunPolicy:
     checkpoint: Checkpoint | None = None
     """The checkpoint it was read from (its counters and evaluations; no replay buffer)."""
 
+    def eval_env(self, render_mode: str | None = None) -> Any:
+        """An environment as the run's evaluations used: fixed-horizon episodes of the run's
+        horizon, its healthy angle range."""
+        from ilfo.envs import make_env
+
+        return make_env(
+            self.config.env,
+            True,
+            horizon=self.env.horizon,
+            render_mode=render_mode,
+            healthy_angle_range=self.config.healthy_angle_range,
+        )
+
 
 def load_run_policy(run_dir: str | Path, which: str = "final") -> RunPolicy:
     """A run's policy: ``final`` (``policy.msgpack``, written when the run finished, else the
