@@ -1,6 +1,6 @@
 """The ``ilfo`` command line: thin wrappers over the library, one module per command group
 (``train``: train, eval, plot; ``experts``: expert train / export / eval; ``data``: reward,
-demos info / convert / collect; ``experiments``: sweep run / status, report, reproduce)."""
+demos info / convert / collect, label; ``experiments``: sweep run / status, report, reproduce)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from typing import TextIO
 
 from ilfo.cli._common import _command as _command  # re-exported: ilfo.cli._command
-from ilfo.cli.data import _add_demos_parser, _add_reward_parser
+from ilfo.cli.data import _add_demos_parser, _add_label_parser, _add_reward_parser
 from ilfo.cli.experiments import _add_report_parser, _add_reproduce_parser, _add_sweep_parser
 from ilfo.cli.experts import _add_expert_parser
 from ilfo.cli.train import _add_eval_parser, _add_plot_parser, _add_train_parser
@@ -36,6 +36,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     _add_expert_parser(sub)
     _add_reward_parser(sub)
     _add_demos_parser(sub)
+    _add_label_parser(sub)
     _add_sweep_parser(sub)
     _add_report_parser(sub)
     _add_reproduce_parser(sub)

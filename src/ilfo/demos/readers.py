@@ -277,9 +277,7 @@ def read_minari(path: str | Path) -> DemoFile:
     try:
         with h5py.File(h5file, "r") as f:
             meta = _minari_metadata(h5file, f)
-            names = sorted(
-                (k for k in f if _EPISODE_RE.fullmatch(k)), key=lambda k: int(k.split("_")[1])
-            )
+            names = minari_episode_names(f)
             if not names:
                 raise ValueError(f"{h5file} has no episode_<i> groups: not a Minari dataset")
             episodes = []
@@ -366,20 +364,16 @@ def read_d4rl(path: str | Path) -> DemoFile:
             if data[key].ndim != 1:
                 raise ValueError(f"{path}: {key!r} must be 1-D, got shape {data[key].shape}")
             done |= data[key] != 0
-    ends = np.flatnonzero(done) + 1
     unfinished = not done[-1]
-    bounds = np.unique(np.concatenate([[0], ends, [n]]))
     extras = {k: data[k] for k in ("actions", "rewards") if k in data}
-    episodes, dropped = [], 0
-    for s, e in itertools.pairwise(bounds.tolist()):
-        if next_obs is not None:
-            ep_obs, stop = np.concatenate([obs[s:e], next_obs[e - 1 : e]]), e
-        else:
-            ep_obs, stop = obs[s:e], e - 1
-        if len(ep_obs) < 2:
-            dropped += 1
-            continue
+    episodes = []
+    spans = d4rl_spans(done, next_obs is not None)
+    for s, e, stop in spans:
+        ep_obs = (
+            np.concatenate([obs[s:e], next_obs[e - 1 : e]]) if next_obs is not None else obs[s:e]
+        )
         episodes.append(Episode(observations=ep_obs, **{k: v[s:stop] for k, v in extras.items()}))
+    dropped = len(np.unique(np.concatenate([[0], np.flatnonzero(done) + 1, [n]]))) - 1 - len(spans)
     if not episodes:
         raise ValueError(f"{path}: no episode has a complete transition")
     provenance: dict[str, Any] = {
@@ -391,6 +385,27 @@ def read_d4rl(path: str | Path) -> DemoFile:
     if dropped:
         provenance["dropped_one_step_episodes"] = dropped
     return DemoFile(episodes=checked_episodes(episodes, path), env_id="", provenance=provenance)
+
+
+def d4rl_spans(done: np.ndarray, has_next_observations: bool) -> list[tuple[int, int, int]]:
+    """The episodes of a D4RL file's rows, as (start, end, stop): rows start..end-1 give its
+    observations (plus ``next_observations[end - 1]`` where the file has them), rows
+    start..stop-1 its transitions (``stop = end`` with next observations, else ``end - 1``: the
+    state after the last row is unknown). Episodes end after each row flagged done; one-row
+    episodes without next observations have no transition and are left out."""
+    n = len(done)
+    bounds = np.unique(np.concatenate([[0], np.flatnonzero(done) + 1, [n]]))
+    spans = []
+    for s, e in itertools.pairwise(bounds.tolist()):
+        stop = e if has_next_observations else e - 1
+        if stop > s:
+            spans.append((s, e, stop))
+    return spans
+
+
+def minari_episode_names(f: Any) -> list[str]:
+    """A Minari HDF5 file's ``episode_<i>`` groups in order of i (the episodes' order)."""
+    return sorted((k for k in f if _EPISODE_RE.fullmatch(k)), key=lambda k: int(k.split("_")[1]))
 
 
 _READERS: dict[str, Callable[[str | Path], DemoFile]] = {

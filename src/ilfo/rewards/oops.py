@@ -125,6 +125,14 @@ class OOPS:
             demo_index=index,
         )
 
+    def couplings(self, observations: np.ndarray) -> list[OTResult]:
+        """The episode's coupling with each demo in turn (no draw, no pooling): what offline
+        labelling aggregates over demos (``ilfo.labelling``). ``row_costs`` are the raw
+        transported costs, before OOPS's reward scale."""
+        observations = check_episode(observations, self.obs_dim)
+        learner = make_atoms(self.standardizer(observations), self.config.atoms)
+        return [self._solve(learner, e, i) for i, e in enumerate(self.expert_atoms)]
+
     def state(self) -> RewardState:
         """The demo draws' generator state, and the potentials kept for warm starts as named
         arrays ``f_<demo>`` and ``g_<demo>`` (demo -1: the pooled demos; none without

@@ -1,0 +1,249 @@
+"""Offline labelling: every episode of an offline dataset rewarded by optimal transport to
+state-only demos, for offline RL (IQL and others), as OTR does (Luo et al., "Optimal Transport
+for Offline Imitation Learning", ICLR 2023).
+
+For each episode and each demo, OOPS's coupling of the episode's atoms (its transitions, by
+default) with the demo's gives each step a transported cost c_t; the step's reward against
+that demo is ``squash(-c_t)``: ``oops`` (OOPS's own reward, -reward_scale * T / sqrt(d) * c_t,
+what ilfo's agents learn from), ``linear`` (alpha * -c_t) or ``exponential`` (alpha *
+exp(beta * -c_t), OTR's choice for locomotion, alpha = beta = 5). With several demos, the
+episode's rewards are the mean over the ``top_k`` demos whose rewards sum highest (OTR's
+aggregation; top_k 1: the best-matching demo). Episodes are independent: they are labelled in
+parallel over ``workers`` processes.
+
+Formats (read by ``ilfo.demos.load_any``, written back in kind): ilfo ``.npz``, Minari HDF5
+datasets (a copy of the dataset directory, each ``episode_<i>/rewards`` replaced) and D4RL
+HDF5 files (a copy, ``rewards`` replaced row by row). A D4RL file without
+``next_observations`` has no transition for the last row of each episode: that row gets the
+reward of the episode's last labelled step (and a one-row episode, none at all, 0).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import shutil
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from ilfo.rewards import OOPS, OOPSConfig
+
+Squashing = Literal["oops", "linear", "exponential"]
+
+
+@dataclass(frozen=True)
+class LabelConfig:
+    """How episodes are rewarded."""
+
+    oops: OOPSConfig = field(default_factory=OOPSConfig)
+    """The OT problem: atoms, cost, solver, lambda, standardisation (the paper's defaults);
+    ``demo_selection`` and ``seed`` are not used (every demo is solved, then ``top_k``)."""
+    squashing: Squashing = "exponential"
+    """``oops`` (OOPS's reward scale), ``linear`` (alpha * -c) or ``exponential``
+    (alpha * exp(beta * -c), OTR's)."""
+    alpha: float = 5.0
+    """Scale of the linear and exponential squashing (OTR: 5 for exponential, 10 for
+    linear)."""
+    beta: float = 5.0
+    """Rate of the exponential squashing (OTR: 5)."""
+    top_k: int = 1
+    """Demos averaged: the k whose rewards of the episode sum highest (OTR's top-k)."""
+
+    def __post_init__(self) -> None:
+        if self.squashing not in ("oops", "linear", "exponential"):
+            raise ValueError(
+                f"squashing must be oops, linear or exponential, got {self.squashing!r}"
+            )
+        if isinstance(self.top_k, bool) or not isinstance(self.top_k, int) or self.top_k < 1:
+            raise ValueError(f"top_k must be an integer >= 1, got {self.top_k!r}")
+        for name in ("alpha", "beta"):
+            if not np.isfinite(getattr(self, name)):
+                raise ValueError(f"{name} must be finite, got {getattr(self, name)!r}")
+
+
+class EpisodeLabeller:
+    """``EpisodeLabeller(demos, config)(observations) -> rewards (T,)``."""
+
+    def __init__(self, demos: Sequence[np.ndarray], config: LabelConfig | None = None) -> None:
+        self.config = config or LabelConfig()
+        if self.config.top_k > len(demos):
+            raise ValueError(f"top_k {self.config.top_k} exceeds the {len(demos)} demos given")
+        self.oops = OOPS(demos, dataclasses.replace(self.config.oops, warm_start=False))
+
+    def __call__(self, observations: np.ndarray) -> np.ndarray:
+        cfg = self.config
+        couplings = self.oops.couplings(observations)
+        costs = np.stack([c.row_costs for c in couplings])  # (demos, T)
+        if cfg.squashing == "oops":
+            scale = cfg.oops.reward_scale * costs.shape[1] / np.sqrt(self.oops.obs_dim)
+            rewards = -scale * costs
+        elif cfg.squashing == "linear":
+            rewards = cfg.alpha * -costs
+        else:
+            rewards = cfg.alpha * np.exp(cfg.beta * -costs)
+        best = np.argsort(-rewards.sum(axis=1), kind="stable")[: cfg.top_k]
+        return rewards[best].mean(axis=0)
+
+
+@dataclass(frozen=True)
+class LabelSummary:
+    """What ``label_dataset`` did."""
+
+    out: Path
+    format: str
+    episodes: int
+    transitions: int
+    seconds: float
+    reward_mean: float
+    reward_std: float
+
+
+_WORKER: dict[str, Any] = {}
+
+
+def _init_worker(demos: list[np.ndarray], config: LabelConfig) -> None:
+    _WORKER["labeller"] = EpisodeLabeller(demos, config)
+
+
+def _label_chunk(chunk: list[np.ndarray]) -> list[np.ndarray]:
+    return [_WORKER["labeller"](obs) for obs in chunk]
+
+
+def label_episodes(
+    episodes: Sequence[np.ndarray],
+    demos: Sequence[np.ndarray],
+    config: LabelConfig | None = None,
+    *,
+    workers: int = 1,
+    on_progress: Callable[[int], None] | None = None,
+) -> list[np.ndarray]:
+    """Rewards (T_i,) of each episode's observations (T_i + 1, d), over ``workers``
+    processes (1: in this process). ``on_progress(n)`` after each chunk of n episodes."""
+    config = config or LabelConfig()
+    demos = [np.asarray(d, np.float64) for d in demos]
+    EpisodeLabeller(demos, config)  # bad settings fail here, not in a worker
+    if workers <= 1:
+        _init_worker(demos, config)
+        out = []
+        for obs in episodes:
+            out.append(_WORKER["labeller"](obs))
+            if on_progress:
+                on_progress(1)
+        return out
+    size = max(1, min(32, len(episodes) // (4 * workers) or 1))
+    chunks = [list(episodes[i : i + size]) for i in range(0, len(episodes), size)]
+    results: list[np.ndarray] = []
+    with ProcessPoolExecutor(workers, initializer=_init_worker, initargs=(demos, config)) as pool:
+        for chunk, labelled in zip(chunks, pool.map(_label_chunk, chunks), strict=True):
+            results.extend(labelled)
+            if on_progress:
+                on_progress(len(chunk))
+    return results
+
+
+def label_dataset(
+    dataset: str | Path,
+    demos_file: str | Path,
+    out: str | Path,
+    config: LabelConfig | None = None,
+    *,
+    num_demos: int | None = None,
+    env_id: str | None = None,
+    workers: int = 1,
+    on_progress: Callable[[int], None] | None = None,
+) -> LabelSummary:
+    """Label every episode of ``dataset`` with OT rewards from the first ``num_demos`` (all:
+    None) demos of ``demos_file``, and write the dataset to ``out`` in its own format (see the
+    module). ``out`` must not exist (nothing is overwritten)."""
+    from ilfo import demos as demo_io
+    from ilfo.demos.readers import detect_format
+
+    dataset, out = Path(dataset), Path(out)
+    if out.exists():
+        raise FileExistsError(f"{out} exists: labelling writes a new file or directory")
+    fmt = detect_format(dataset)
+    if fmt not in ("ilfo", "minari", "d4rl"):
+        raise ValueError(f"{dataset}: labelling writes ilfo, Minari or D4RL files, not {fmt}")
+    data = demo_io.load_any(dataset, env_id=env_id)
+    expert = demo_io.load_any(demos_file)
+    expert_obs = [e.observations for e in expert.episodes[:num_demos]]
+    if not expert_obs:
+        raise ValueError(f"{demos_file}: no demos")
+    if expert_obs[0].shape[1] != data.episodes[0].observations.shape[1]:
+        raise ValueError(
+            f"{demos_file} has {expert_obs[0].shape[1]}-dim observations, {dataset} has "
+            f"{data.episodes[0].observations.shape[1]}"
+        )
+    start = time.perf_counter()
+    rewards = label_episodes(
+        [e.observations for e in data.episodes],
+        expert_obs,
+        config,
+        workers=workers,
+        on_progress=on_progress,
+    )
+    seconds = time.perf_counter() - start
+    writers = {"ilfo": _write_ilfo, "minari": _write_minari, "d4rl": _write_d4rl}
+    writers[fmt](dataset, out, data, rewards)
+    flat = np.concatenate(rewards)
+    return LabelSummary(
+        out, fmt, len(rewards), int(flat.size), seconds, float(flat.mean()), float(flat.std())
+    )
+
+
+def _write_ilfo(dataset: Path, out: Path, data: Any, rewards: list[np.ndarray]) -> None:
+    from ilfo import demos as demo_io
+
+    episodes = [
+        dataclasses.replace(e, rewards=r.astype(np.float64))
+        for e, r in zip(data.episodes, rewards, strict=True)
+    ]
+    provenance = {
+        **data.provenance,
+        "rewards": "OT labels (ilfo label)",
+        "labelled_from": str(dataset),
+    }
+    demo_io.save(out, episodes, data.env_id, provenance)
+
+
+def _write_minari(dataset: Path, out: Path, data: Any, rewards: list[np.ndarray]) -> None:
+    import h5py
+
+    from ilfo.demos.readers import _minari_file, minari_episode_names
+
+    source = _minari_file(dataset)
+    root = source.parent.parent if source.parent.name == "data" else source.parent
+    shutil.copytree(root, out)
+    target = out / source.relative_to(root)
+    with h5py.File(target, "r+") as f:
+        for name, r in zip(minari_episode_names(f), rewards, strict=True):
+            if "rewards" in f[name]:
+                del f[name]["rewards"]
+            f[name].create_dataset("rewards", data=r.astype(np.float64))
+
+
+def _write_d4rl(dataset: Path, out: Path, data: Any, rewards: list[np.ndarray]) -> None:
+    import h5py
+
+    from ilfo.demos.readers import d4rl_spans
+
+    shutil.copyfile(dataset, out)
+    with h5py.File(out, "r+") as f:
+        n = len(f["observations"])
+        done = np.zeros(n, dtype=bool)
+        for key in ("terminals", "timeouts"):
+            if key in f:
+                done |= f[key][()] != 0
+        has_next = "next_observations" in f
+        column = np.zeros(n, dtype=np.float32)
+        for (s, e, stop), r in zip(d4rl_spans(done, has_next), rewards, strict=True):
+            column[s:stop] = r
+            column[stop:e] = r[-1]  # the last row's transition is unknown: its step's reward
+        if "rewards" in f:
+            del f["rewards"]
+        f.create_dataset("rewards", data=column)
