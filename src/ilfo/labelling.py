@@ -21,6 +21,8 @@ reward of the episode's last labelled step (and a one-row episode, none at all, 
 from __future__ import annotations
 
 import dataclasses
+import multiprocessing
+import os
 import shutil
 import time
 from collections.abc import Callable, Sequence
@@ -31,6 +33,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from ilfo.experiments.worker import THREAD_VARIABLES
 from ilfo.rewards import OOPS, OOPSConfig
 
 Squashing = Literal["oops", "linear", "exponential"]
@@ -138,11 +141,27 @@ def label_episodes(
     size = max(1, min(32, len(episodes) // (4 * workers) or 1))
     chunks = [list(episodes[i : i + size]) for i in range(0, len(episodes), size)]
     results: list[np.ndarray] = []
-    with ProcessPoolExecutor(workers, initializer=_init_worker, initargs=(demos, config)) as pool:
-        for chunk, labelled in zip(chunks, pool.map(_label_chunk, chunks), strict=True):
-            results.extend(labelled)
-            if on_progress:
-                on_progress(len(chunk))
+    # Fresh (spawned) workers with one BLAS thread each: side by side, OpenBLAS's default pools
+    # oversubscribe the cores and slow every solve 10x (bench/label.py).
+    saved = {k: os.environ.get(k) for k in THREAD_VARIABLES}
+    os.environ.update(dict.fromkeys(THREAD_VARIABLES, "1"))
+    try:
+        with ProcessPoolExecutor(
+            workers,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_init_worker,
+            initargs=(demos, config),
+        ) as pool:
+            for chunk, labelled in zip(chunks, pool.map(_label_chunk, chunks), strict=True):
+                results.extend(labelled)
+                if on_progress:
+                    on_progress(len(chunk))
+    finally:
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
     return results
 
 
