@@ -1,0 +1,135 @@
+"""The SB3 integration: the rows rewritten are exactly each episode's (wrap-around, several
+envs ending at different times), rewards equal the episode reward's, the task reward never
+reaches the learner, a run is deterministic under a seed."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+sb3 = pytest.importorskip("stable_baselines3")
+from stable_baselines3.common.vec_env import DummyVecEnv  # noqa: E402
+
+from ilfo.integrations.sb3 import OTReplayBuffer  # noqa: E402
+
+TASK_REWARD = 1e6  # would show anywhere it leaked
+
+
+class RandomLengthEnv(gym.Env):
+    """3-dim observations that drift with the action; episodes of 3-25 steps (terminated or
+    truncated at random); every step pays TASK_REWARD. Logs each episode's observations."""
+
+    observation_space = gym.spaces.Box(-np.inf, np.inf, (3,), np.float32)
+    action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+
+    def __init__(self, seed):
+        self.rng = np.random.default_rng(seed)
+        self.log = []  # (observations (T + 1, 3), ended) per episode, in order
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.length = int(self.rng.integers(3, 26))
+        self.t = 0
+        self.obs = self.rng.normal(size=3).astype(np.float32)
+        self.log.append([self.obs.copy()])
+        return self.obs.copy(), {}
+
+    def step(self, action):
+        self.t += 1
+        self.obs = (self.obs + 0.1 * np.r_[action, action[0]] + 0.01).astype(np.float32)
+        self.log[-1].append(self.obs.copy())
+        end = self.t >= self.length
+        terminated, truncated = end and self.length % 2 == 0, end and self.length % 2 == 1
+        return self.obs.copy(), TASK_REWARD, terminated, truncated, {}
+
+
+def episode_reward(observations):
+    """A deterministic function of the whole episode: each step's distance to the episode's
+    mean, so that a wrong row or a wrong episode gives other numbers."""
+    steps = observations[1:] - observations.mean(axis=0)
+    return -np.linalg.norm(steps, axis=1) - 0.001 * len(observations)
+
+
+def _train(seed, n_envs=3, buffer_size=120, steps=300):
+    envs = [RandomLengthEnv(seed * 10 + j) for j in range(n_envs)]
+    vec = DummyVecEnv([lambda e=e: e for e in envs])
+    model = sb3.TD3(
+        "MlpPolicy",
+        vec,
+        buffer_size=buffer_size,
+        learning_starts=90,
+        batch_size=16,
+        policy_kwargs={"net_arch": [16, 16]},
+        replay_buffer_class=OTReplayBuffer,
+        replay_buffer_kwargs={"reward": episode_reward},
+        seed=seed,
+        device="cpu",
+    )
+    model.learn(total_timesteps=steps * n_envs)
+    return model, envs
+
+
+def test_rows_rewritten_are_exactly_each_episode():
+    model, envs = _train(seed=0)
+    buffer = model.replay_buffer
+    assert buffer.full  # 300 steps in 40 rows per env: the ring wrapped many times
+    writes = model.num_timesteps // len(envs)  # steps stored per env column
+    for j, env in enumerate(envs):
+        # env j's transitions in order, each with its episode's label (None while running)
+        stream = []
+        for index, observations in enumerate(env.log):
+            observations = np.asarray(observations, np.float64)
+            running = index == len(env.log) - 1  # auto-reset: every earlier episode has ended
+            labels = None if running else episode_reward(observations)
+            stream += [(labels, t, observations) for t in range(len(observations) - 1)]
+        stream = stream[:writes]
+        for k in range(writes - buffer.buffer_size, writes):
+            labels, t, observations = stream[k]
+            row = k % buffer.buffer_size
+            np.testing.assert_array_equal(buffer.observations[row, j], observations[t])
+            if labels is None:
+                assert not buffer.ready[row, j] and buffer.rewards[row, j] == 0
+            else:
+                assert buffer.ready[row, j]
+                assert buffer.rewards[row, j] == pytest.approx(labels[t], rel=1e-5)
+
+
+def test_the_task_reward_never_reaches_the_learner():
+    model, _ = _train(seed=1, steps=120)
+    buffer = model.replay_buffer
+    assert buffer.episodes_labelled > 10
+    assert np.all(np.abs(buffer.rewards) < TASK_REWARD / 10)
+    batch = buffer.sample(512)
+    sampled = batch.rewards.numpy().reshape(-1)
+    ready = buffer.rewards[buffer.ready]
+    assert np.all(np.isin(sampled.astype(np.float32), ready.astype(np.float32)))
+
+
+def test_deterministic_under_a_seed():
+    a, _ = _train(seed=2, steps=100)
+    b, _ = _train(seed=2, steps=100)
+    np.testing.assert_array_equal(a.replay_buffer.rewards, b.replay_buffer.rewards)
+    np.testing.assert_array_equal(a.replay_buffer.ready, b.replay_buffer.ready)
+    for pa, pb in zip(a.policy.parameters(), b.policy.parameters(), strict=True):
+        np.testing.assert_array_equal(pa.detach().numpy(), pb.detach().numpy())
+
+
+def test_bad_settings_are_refused_clearly():
+    space = gym.spaces.Box(-1, 1, (3,), np.float32)
+    act = gym.spaces.Box(-1, 1, (2,), np.float32)
+    with pytest.raises(ValueError, match="optimize_memory_usage"):
+        OTReplayBuffer(10, space, act, optimize_memory_usage=True, reward=episode_reward)
+    with pytest.raises(ValueError, match="flat Box"):
+        OTReplayBuffer(10, gym.spaces.Discrete(3), act, reward=episode_reward)
+    with pytest.raises(ValueError, match="observation_columns"):
+        OTReplayBuffer(10, space, act, reward=episode_reward, observation_columns=4)
+    empty = OTReplayBuffer(10, space, act, reward=episode_reward)
+    with pytest.raises(ValueError, match="learning_starts"):
+        empty.sample(4)
+    short = OTReplayBuffer(10, space, act, reward=lambda obs: np.zeros(1))
+    short.add(np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 2)), np.ones(1), np.zeros(1), [{}])
+    with pytest.raises(ValueError, match="1 rewards for an episode of 2 steps"):
+        short.add(
+            np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 2)), np.ones(1), np.ones(1), [{}]
+        )
