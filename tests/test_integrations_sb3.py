@@ -133,3 +133,23 @@ def test_bad_settings_are_refused_clearly():
         short.add(
             np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 2)), np.ones(1), np.ones(1), [{}]
         )
+
+
+@pytest.mark.parametrize("name", ["SAC", "TD3"])
+def test_sbx_algorithms_learn_from_the_relabelled_buffer(name):
+    sbx = pytest.importorskip("sbx")
+    envs = [RandomLengthEnv(40 + j) for j in range(2)]
+    model = getattr(sbx, name)(
+        "MlpPolicy",
+        DummyVecEnv([lambda e=e: e for e in envs]),
+        buffer_size=200,
+        learning_starts=60,
+        batch_size=16,
+        replay_buffer_class=OTReplayBuffer,
+        replay_buffer_kwargs={"reward": episode_reward},
+        seed=0,
+    )
+    model.learn(total_timesteps=300)
+    buffer = model.replay_buffer
+    assert buffer.episodes_labelled > 10 and buffer.ready.any()
+    assert np.all(np.abs(buffer.rewards) < TASK_REWARD / 10)
