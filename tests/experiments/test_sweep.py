@@ -76,7 +76,7 @@ def test_variants_merge_into_the_parts():
 @pytest.mark.parametrize(
     "kwargs, message",
     [
-        ({"config": {"seed": 3}}, "its own axis"),
+        ({"config": {"seed": 3}}, "its axis"),
         ({"config": {"out": "x"}}, "sweep directory"),
         ({"seed": (0, 0)}, "twice"),
         ({"algo": ()}, "at least one"),

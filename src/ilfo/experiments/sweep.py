@@ -83,9 +83,15 @@ class SweepSpec:
             object.__setattr__(self, "variants", json.loads(json.dumps(variants)))
         except (TypeError, ValueError) as err:
             raise ValueError(f"sweep config and variants must be JSON data: {err}") from None
+        axis_flags = {
+            "env": "--env",
+            "algo": "--algo",
+            "num_demos": "--num-demos",
+            "seed": "--seeds",
+        }
         for key in self.config:
             if key in AXES or key == "out":
-                where = "its own axis" if key in AXES else "the sweep directory"
+                where = f"its axis ({axis_flags[key]})" if key in AXES else "the sweep directory"
                 raise ValueError(f"sweep config cannot set {key!r}: {where} sets it")
         for name, change in self.variants.items():
             if not name or "__" in name or "/" in name:
