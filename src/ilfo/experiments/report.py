@@ -20,6 +20,7 @@ import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -501,17 +502,25 @@ def _plot_curves(report: Report, out: Path) -> list[Path]:
             label = f"{_label(c.algo, c.num_demos, c.variant)} ({len(c.runs)} seeds)"
             ax.plot(steps, mean, label=label)
             ax.fill_between(steps, low, high, alpha=0.2)
-        ax.set_title(f"{env}: mean over seeds, 95% bootstrap band")
-        ax.set_xlabel("environment steps")
-        ax.set_ylabel("normalised score")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
-        fig.tight_layout()
+        title = f"{env}: mean over seeds, 95% bootstrap band"
         path = out / f"curves_{env}.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        figures.append(path)
+        figures.append(_finish(fig, ax, title, "environment steps", "normalised score", path))
     return figures
+
+
+def _finish(fig: Any, ax: Any, title: str, xlabel: str, ylabel: str, path: Path) -> Path:
+    """Label, save and close a report figure."""
+    import matplotlib.pyplot as plt
+
+    ax.set_title(title)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
 
 
 def _plot_profiles(report: Report, out: Path) -> list[Path]:
@@ -533,14 +542,8 @@ def _plot_profiles(report: Report, out: Path) -> list[Path]:
             )
             ax.plot(taus, profile, label=f"{_label(algo, demos, variant)} ({len(envs)} tasks)")
             ax.fill_between(taus, low, high, alpha=0.2)
-        ax.set_title(f"Performance profile, {demos} demo{'s' * (demos > 1)}")
-        ax.set_xlabel("normalised score tau")
-        ax.set_ylabel("fraction of runs with score > tau")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
-        fig.tight_layout()
+        title = f"Performance profile, {demos} demo{'s' * (demos > 1)}"
         path = out / f"profile_{demos}demos.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        figures.append(path)
+        ylabel = "fraction of runs with score > tau"
+        figures.append(_finish(fig, ax, title, "normalised score tau", ylabel, path))
     return figures

@@ -34,6 +34,12 @@ def _runs(scores: np.ndarray) -> np.ndarray:
     return scores
 
 
+def _task_columns(scores: np.ndarray) -> list[np.ndarray]:
+    """Each task's finite runs (tasks without any left out)."""
+    columns = [scores[np.isfinite(scores[:, t]), t] for t in range(scores.shape[1])]
+    return [c for c in columns if c.size]
+
+
 def iqm(scores: np.ndarray) -> float:
     """Interquartile mean of all runs of all tasks: the mean of the middle 50% (the lowest and
     highest 25% of the pooled scores trimmed)."""
@@ -93,8 +99,7 @@ def stratified_bootstrap(
     stratified bootstrap samples: each task's runs are drawn with replacement from that task's
     own runs (missing runs left out), the tasks kept as they are."""
     scores = _runs(scores)
-    columns = [scores[np.isfinite(scores[:, t]), t] for t in range(scores.shape[1])]
-    columns = [c for c in columns if c.size]
+    columns = _task_columns(scores)
     if not columns:
         nan = float("nan")
         return Interval(nan, nan, nan)
@@ -142,8 +147,7 @@ def performance_profile_band(
     """The profile and its pointwise stratified-bootstrap percentile band: (profile, low,
     high), each of ``taus``' shape."""
     scores = _runs(scores)
-    columns = [scores[np.isfinite(scores[:, t]), t] for t in range(scores.shape[1])]
-    columns = [c for c in columns if c.size]
+    columns = _task_columns(scores)
     taus = np.asarray(taus, dtype=float)
     rng = np.random.default_rng(seed)
     samples = np.empty((resamples, taus.size))
