@@ -21,30 +21,15 @@ from datetime import date
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import spearmanr
 
 # Keep this folder off the path: bench/ot.py would shadow POT's `ot`.
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
-from ilfo import demos
 from ilfo.benchmarking import machine
-from ilfo.envs import episode_scores, make_env
-from ilfo.experts import expert_dir, load_expert
+from ilfo.experiments.calibration import calibrate, spearman
 from ilfo.ot import METRICS
-from ilfo.rewards import OOPS, OOPSConfig
+from ilfo.rewards import OOPSConfig
 
 NOISE_LEVELS = (0.0, 0.1, 0.2, 0.3, 0.5, 0.8, 1.2)
-
-
-def rollout(env, act, horizon: int, seed: int) -> tuple[np.ndarray, float]:
-    """One fixed-horizon episode of ``act(obs, t)``: observations and the paper's task score."""
-    obs, _ = env.reset(seed=seed)
-    observations, rewards, fell = [obs], [], []
-    for t in range(horizon):
-        obs, reward, _, _, info = env.step(act(obs, t))
-        observations.append(obs)
-        rewards.append(reward)
-        fell.append(info["env_terminated"])
-    return np.asarray(observations), episode_scores(np.array(rewards), np.array(fell))[0]
 
 
 def main() -> None:
@@ -63,58 +48,35 @@ def main() -> None:
     parser.add_argument("--json", action="store_true", help="one JSON line per policy")
     args = parser.parse_args()
 
-    directory = Path(args.expert) if args.expert else expert_dir(args.env)
-    expert = load_expert(directory)
-    if expert.config.env != args.env:
-        parser.error(f"{directory} is an expert for {expert.config.env}: pass --env too")
-    demo = demos.load(directory / "demos.npz").episodes[0].observations
-    rewarder = OOPS([demo], OOPSConfig(metric=args.metric, atoms=args.atoms))
-    env = make_env(args.env, fixed_horizon=True, horizon=expert.horizon)
-    low, high = env.action_space.low, env.action_space.high
-    act_expert = expert.agent.functions.act
-
-    def policy(kind: str | float, rng: np.random.Generator):
-        def act(obs: np.ndarray, t: int) -> np.ndarray:
-            if kind == "zero":
-                return np.zeros_like(low)
-            if kind == "random":
-                return rng.uniform(low, high)
-            agent_obs = obs
-            if expert.agent.time_feature:
-                agent_obs = np.append(obs, (expert.horizon - t) / expert.horizon)
-            action = np.asarray(act_expert(expert.policy, agent_obs.astype(np.float32)))
-            return np.clip(action + rng.normal(0.0, kind, action.shape), low, high)
-
-        return act
-
     stamp = {"date": date.today().isoformat(), "machine": machine(), "metric": args.metric,
              "atoms": args.atoms}  # fmt: skip
-    scores, proxies = [], []
+    points = calibrate(
+        args.env,
+        NOISE_LEVELS,
+        args.episodes,
+        OOPSConfig(metric=args.metric, atoms=args.atoms),
+        expert_directory=args.expert,
+    )
     if not args.json:
         print(
             f"{args.env}, {args.episodes} episodes per row, OOPS ({args.metric}, "
             f"{args.atoms}) against demo 0"
         )
         print(f"{'policy':>14} {'task score':>11} {'proxy return':>13} {'OT distance':>12}")
-    for kind in (*NOISE_LEVELS, "zero", "random"):
-        rng = np.random.default_rng(0)
-        rows = []
-        for k in range(args.episodes):
-            observations, score = rollout(env, policy(kind, rng), expert.horizon, seed=100 + k)
-            out = rewarder(observations)
-            rows.append((score, float(out.rewards.sum()), out.distance))
-        score, proxy, distance = np.mean(rows, axis=0)
-        scores += [r[0] for r in rows]
-        proxies += [r[1] for r in rows]
-        name = f"expert + N(0, {kind}^2)" if isinstance(kind, float) else kind
+    for name in dict.fromkeys(p.policy for p in points):
+        group = [p for p in points if p.policy == name]
+        score, proxy, distance = (
+            float(np.mean([getattr(p, k) for p in group]))
+            for k in ("task_score", "proxy_return", "ot_distance")
+        )
         if args.json:
             print(json.dumps({"bench": "calibration", "env": args.env, "policy": name,
-                              "noise": kind if isinstance(kind, float) else None,
-                              "task_score": round(score, 1), "proxy_return": round(proxy, 1),
-                              "ot_distance": round(distance, 3), **stamp}))  # fmt: skip
+                              "noise": group[0].noise, "task_score": round(score, 1),
+                              "proxy_return": round(proxy, 1), "ot_distance": round(distance, 3),
+                              **stamp}))  # fmt: skip
         else:
             print(f"{name:>14} {score:11.1f} {proxy:13.1f} {distance:12.3f}")
-    rho = float(spearmanr(scores, proxies).statistic)
+    rho = spearman(points)
     if args.json:
         print(
             json.dumps({"bench": "calibration_summary", "env": args.env, "spearman": rho, **stamp})

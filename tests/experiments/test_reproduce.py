@@ -17,7 +17,7 @@ from ilfo.experiments.reproduce import ABLATIONS, BUDGETS, EXPERIMENTS, TABLE1_A
 @pytest.mark.parametrize("budget", BUDGETS)
 def test_every_experiment_plans(name, budget):
     the_plan = plan(name, budget)
-    assert the_plan.runs > 0 and the_plan.core_hours() > 0
+    assert (the_plan.runs > 0 or the_plan.calibration is not None) and the_plan.core_hours() > 0
     for spec in the_plan.sweeps.values():
         assert all(algo in ALGOS for algo in spec.algo)
     text = the_plan.describe()
@@ -63,3 +63,21 @@ def test_table1_smoke_runs_into_a_report(tmp_path, capsys):
     # Run again: everything is done, nothing trains, the report is rewritten.
     assert main(["reproduce", "table1", "--budget", "smoke", "--dir", str(root),
                  "--no-progress"]) == 0  # fmt: skip
+
+
+def test_calibration_smoke_and_its_numbers(tmp_path):
+    """The calibration's smoke budget: the expert, its noisy versions, zero and random actions;
+    the expert's proxy return is the highest and the rank correlation is written."""
+    from ilfo.experiments.calibration import calibrate, spearman
+
+    points = calibrate("Hopper-v5", (0.0, 1.0), episodes=1, horizon=100)
+    assert [p.policy for p in points] == [
+        "expert + N(0, 0.0^2)", "expert + N(0, 1.0^2)", "zero", "random"
+    ]  # fmt: skip
+    by = {p.policy: p for p in points}
+    assert by["expert + N(0, 0.0^2)"].proxy_return > by["random"].proxy_return
+    assert -1 <= spearman(points) <= 1
+    assert main(["reproduce", "calibration", "--budget", "smoke", "--dir", str(tmp_path),
+                 "--no-progress"]) == 0  # fmt: skip
+    text = (tmp_path / "report" / "calibration.md").read_text()
+    assert "Hopper-v5: Spearman" in text and (tmp_path / "report" / "calibration.csv").is_file()

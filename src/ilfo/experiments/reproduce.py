@@ -74,6 +74,21 @@ STEPS_PER_CORE_SECOND: dict[str, float] = {
 
 
 @dataclass(frozen=True)
+class CalibrationPlan:
+    """What the calibration experiment rolls out: per env, each noise level's episodes."""
+
+    envs: tuple[str, ...]
+    noise_levels: tuple[float, ...]
+    episodes: int
+    horizon: int | None = None
+    """Episode length (None: the expert's, 1,000)."""
+
+    @property
+    def rollouts(self) -> int:
+        return len(self.envs) * (len(self.noise_levels) + 2) * self.episodes
+
+
+@dataclass(frozen=True)
 class Plan:
     """What an experiment at a budget runs."""
 
@@ -85,9 +100,12 @@ class Plan:
     """One line per algorithm or variant not run, and why."""
     measures_distances: bool = False
     """Whether the report adds Table 3's Wasserstein distances of each run's final rollouts."""
+    calibration: CalibrationPlan | None = None
+    """The calibration figure's episodes, where the experiment is that figure."""
 
     @property
     def runs(self) -> int:
+        """Training runs (the calibration trains none)."""
         return sum(len(expand(spec)) for spec in self.sweeps.values())
 
     def core_hours(self) -> float:
@@ -103,10 +121,20 @@ class Plan:
                 ):
                     rate /= 3
                 seconds += run.steps / rate
+        if self.calibration is not None:  # ~1,500 env + policy steps/s and ~0.1 s per solve
+            cal = self.calibration
+            seconds += cal.rollouts * ((cal.horizon or 1000) / 1500 + 0.1)
         return seconds / 3600
 
     def describe(self) -> str:
-        lines = [f"{self.name} at the {self.budget} budget: {self.runs} runs"]
+        lines = [f"{self.name} at the {self.budget} budget: {self.runs} training runs"]
+        if self.calibration is not None:
+            cal = self.calibration
+            lines.append(
+                f"  calibration: {', '.join(cal.envs)}; noise levels {list(cal.noise_levels)} "
+                f"(and zero, random actions) x {cal.episodes} episodes of "
+                f"{cal.horizon or 1000} steps: {cal.rollouts} rollouts"
+            )
         for sub, spec in self.sweeps.items():
             variants = f"; variants {', '.join(spec.variants)}" if spec.variants else ""
             lines.append(
@@ -117,7 +145,7 @@ class Plan:
         lines += [f"  left out: {line}" for line in self.left_out]
         hours = self.core_hours()
         amount = f"{hours:.1f} core-hours" if hours >= 1 else f"{60 * hours:.1f} core-minutes"
-        lines.append(f"  estimated {amount} of training (rates of docs/benchmarks.md)")
+        lines.append(f"  estimated {amount} of compute (rates of docs/benchmarks.md)")
         return "\n".join(lines)
 
 
@@ -227,11 +255,34 @@ def _table3(budget: Budget) -> Plan:
 
 
 TABLE3_ALGOS = ("opolo", "pwil-td3", "oops-td3")
+
+
+def _calibration(budget: Budget) -> Plan:
+    from ilfo.experiments.calibration import PAPER_NOISE_LEVELS
+
+    if budget == "smoke":
+        cal = CalibrationPlan(("Hopper-v5",), (0.0, 0.5), 1, horizon=100)
+        left_out = ["the other tasks and noise levels: the small and full budgets"]
+    elif budget == "small":
+        cal = CalibrationPlan(MUJOCO[:3], PAPER_NOISE_LEVELS[::3], 3)
+        left_out = ["Ant-v5, Humanoid-v5 and every 0.1 of l: the full budget"]
+    else:
+        cal = CalibrationPlan(MUJOCO, PAPER_NOISE_LEVELS, 5)
+        left_out = []
+    return Plan("calibration", budget, {}, tuple(left_out), calibration=cal)
+
+
 """Table 3's agents: the paper's top three of Table 1, trained from 10 demos."""
 
-EXPERIMENTS = {"table1": _table1, "table2": _table2, "table3": _table3, "table4": _table4}
-"""The experiments ``ilfo reproduce`` runs (the calibration and the solver-vs-lambda figures
-are not among them yet: ``bench/calibration.py`` computes the first)."""
+EXPERIMENTS = {
+    "table1": _table1,
+    "table2": _table2,
+    "table3": _table3,
+    "table4": _table4,
+    "calibration": _calibration,
+}
+"""The experiments ``ilfo reproduce`` runs (the solver-vs-lambda figure is not among them
+yet)."""
 
 
 def reproduce(
@@ -250,6 +301,15 @@ def reproduce(
 
     the_plan = plan(name, budget)
     root = Path(root)
+    if the_plan.calibration is not None:
+        from ilfo.experiments.calibration import calibrate, write_calibration
+
+        cal = the_plan.calibration
+        results = {
+            env: calibrate(env, cal.noise_levels, cal.episodes, horizon=cal.horizon)
+            for env in cal.envs
+        }
+        return the_plan, write_calibration(results, root / "report")
     for sub, spec in the_plan.sweeps.items():
         sweep = create_sweep(root / sub, spec)
         run_sweep(sweep, backend_factory(), on_change=on_change)
