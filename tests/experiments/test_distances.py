@@ -50,3 +50,21 @@ def test_distances_average_over_pairs():
     assert out["s,s'"] > out["s"] > 0  # more coordinates apart, larger distance
     with pytest.raises(ValueError, match="at least one"):
         distances([], experts)
+
+
+def test_solver_costs_bound_the_exact_one():
+    from ilfo.experiments.distances import solver_distances
+
+    rng = np.random.default_rng(3)
+    rollouts = [_trajectory(rng, steps=20) for _ in range(2)]
+    experts = [_trajectory(rng, steps=25, shift=0.5)]
+    out = solver_distances(rollouts, experts, lambdas=(0.01, 0.1, 1.0))
+    exact = np.mean(
+        [wasserstein(atoms(r, "s,s'"), atoms(e, "s,s'")) for r in rollouts for e in experts]
+    )
+    assert out["W_simplex"] == pytest.approx(exact)
+    assert out["W_greedy"] >= exact - 1e-9
+    sinkhorn = [out[f"W_Sk({lam:g})"] for lam in (0.01, 0.1, 1.0)]
+    assert all(s >= exact - 1e-6 for s in sinkhorn)
+    assert sinkhorn == sorted(sinkhorn)  # more entropy, a looser plan
+    assert out["converged(0.1)"] == 1.0

@@ -42,7 +42,7 @@ def test_plans_leave_out_what_is_not_built_and_follow_the_paper():
         plan("table1", "huge")
 
 
-def test_table1_smoke_runs_into_a_report(tmp_path, capsys):
+def test_table1_smoke_runs_into_a_report(tmp_path, capsys, monkeypatch):
     root = tmp_path / "t1"
     assert main(["reproduce", "table1", "--budget", "smoke", "--dir", str(root),
                  "--no-progress"]) == 0  # fmt: skip
@@ -54,12 +54,24 @@ def test_table1_smoke_runs_into_a_report(tmp_path, capsys):
     assert all(r["finished"] == "True" and r["versus_paper"] == "other demos" for r in rows)
     text = (root / "report" / "report.md").read_text()
     assert all(f"{a}: not built yet" in text for a in TABLE1_ALGOS if a not in ALGOS)
-    # Table 3's distances of one of these runs: 10 rollouts against 10 expert trajectories.
-    from ilfo.experiments.distances import SPACES, run_distances
+    # Table 3 and the solver figure measure these runs' final rollouts: reproduce's wiring with
+    # the sweeps stubbed out (the runs above stand in for the experiments' own).
+    from ilfo.experiments import reproduce as reproduce_module
+    from ilfo.experiments.report import collect_runs
 
-    run_dir = next((root / "table1" / "runs").glob("Hopper-v5__oops-td3__*"))
-    values = run_distances(run_dir, episodes=2, experts=2)
-    assert set(values) == set(SPACES) and all(v > 0 for v in values.values())
+    runs, _ = collect_runs([root / "table1"])
+    oops = [r for r in runs if r.algo == "oops-td3"]
+    monkeypatch.setattr("ilfo.experiments.backends.run_sweep", lambda *a, **k: [])
+    monkeypatch.setattr("ilfo.experiments.report.collect_runs", lambda paths: (oops, []))
+    for name, table in (("table3", "distances.md"), ("solvers", "solvers.md")):
+        _, written = reproduce_module.reproduce(name, "smoke", tmp_path / name, lambda: None)
+        text = (tmp_path / name / "report" / table).read_text()
+        assert "Hopper-v5" in text and any(p.name == table for p in written)
+    distances = (tmp_path / "table3" / "report" / "distances.md").read_text()
+    paper = next(c for c in paper_cells() if c.table == "table3" and c.algo == "oops-td3"
+                 and c.env == "Hopper-v5" and c.space == "s")  # fmt: skip
+    assert f"({paper.mean:.2f})" in distances  # the paper's number beside ilfo's
+    assert (oops[0].run_dir / "distances.json").is_file()  # cached in the run
     # Run again: everything is done, nothing trains, the report is rewritten.
     assert main(["reproduce", "table1", "--budget", "smoke", "--dir", str(root),
                  "--no-progress"]) == 0  # fmt: skip

@@ -83,12 +83,12 @@ def expert_trajectories(demo_file: str | Path, limit: int = 10) -> list[Trajecto
     return [Trajectory(e.observations, np.asarray(e.actions)) for e in episodes]
 
 
-def run_distances(
+def final_rollouts(
     run_dir: str | Path, *, episodes: int = 10, experts: int = 10, first_seed: int = 10_000
-) -> dict[str, float]:
-    """Table 3's distances of a run's final policy: ``episodes`` deterministic fixed-horizon
-    rollouts (seeds from ``first_seed``, apart from training's and evaluation's) against the
-    first ``experts`` trajectories of the run's demo file."""
+) -> tuple[list[Trajectory], list[Trajectory]]:
+    """A run's final policy's ``episodes`` deterministic fixed-horizon rollouts (seeds from
+    ``first_seed``, apart from training's and evaluation's) and the first ``experts``
+    trajectories of its demo file."""
     from ilfo.training import default_demos_path, load_run_policy, rollout_policy
 
     loaded = load_run_policy(run_dir, "final")
@@ -102,4 +102,40 @@ def run_distances(
     finally:
         env.close()
     demo_file = config.demos or default_demos_path(config.env)
-    return distances(rollouts, expert_trajectories(demo_file, experts))
+    return rollouts, expert_trajectories(demo_file, experts)
+
+
+def run_distances(
+    run_dir: str | Path, *, episodes: int = 10, experts: int = 10
+) -> dict[str, float]:
+    """Table 3's distances of a run's final policy (``final_rollouts``) in every space."""
+    return distances(*final_rollouts(run_dir, episodes=episodes, experts=experts))
+
+
+SOLVER_LAMBDAS: tuple[float, ...] = (0.001, 0.005, 0.01, 0.05, 0.1, 0.5, 1.0)
+"""The paper's solver figure's range of the Sinkhorn lambda (0.001 to 1)."""
+
+
+def solver_distances(
+    rollouts: Sequence[Trajectory],
+    experts: Sequence[Trajectory],
+    lambdas: Sequence[float] = SOLVER_LAMBDAS,
+) -> dict[str, float]:
+    """The paper's solver figure: the (s, s') transport cost of each rollout to each expert
+    trajectory under the exact coupling (``W_simplex``), PWIL's greedy one (``W_greedy``)
+    and Sinkhorn's at each lambda (``W_Sk(lambda)``, the cost <C, P> of its plan; with the
+    share of its solves that converged as ``converged(lambda)``), averaged over the pairs.
+    Every coupling's cost bounds the exact one from above: lower is tighter."""
+    from ilfo.ot import cost_matrix, emd, greedy, sinkhorn
+
+    sums: dict[str, list[float]] = {}
+    for r in rollouts:
+        for e in experts:
+            cost = cost_matrix(atoms(r, "s,s'"), atoms(e, "s,s'"), "euclidean")
+            sums.setdefault("W_simplex", []).append(emd(cost).cost)
+            sums.setdefault("W_greedy", []).append(greedy(cost).cost)
+            for lam in lambdas:
+                result = sinkhorn(cost, reg=lam)
+                sums.setdefault(f"W_Sk({lam:g})", []).append(result.cost)
+                sums.setdefault(f"converged({lam:g})", []).append(float(result.converged))
+    return {k: float(np.mean(v)) for k, v in sums.items()}

@@ -98,8 +98,11 @@ class Plan:
     """Sweep specs by sub-directory name."""
     left_out: tuple[str, ...]
     """One line per algorithm or variant not run, and why."""
-    measures_distances: bool = False
-    """Whether the report adds Table 3's Wasserstein distances of each run's final rollouts."""
+    measures: tuple[Literal["distances", "solvers"], ...] = ()
+    """What the report adds from each run's final rollouts: Table 3's distances, the solver
+    figure's transport costs."""
+    measure_episodes: int = 10
+    """Final rollouts per run, and expert trajectories, that ``measures`` use (the paper: 10)."""
     calibration: CalibrationPlan | None = None
     """The calibration figure's episodes, where the experiment is that figure."""
 
@@ -251,7 +254,25 @@ def _table3(budget: Budget) -> Plan:
         spec = SweepSpec(
             env=MUJOCO, algo=algos, num_demos=(10,), seed=(0, 1, 2, 3, 4), config=FULL_CONFIG
         )
-    return Plan("table3", budget, {"table3": spec}, tuple(left_out), measures_distances=True)
+    episodes = 2 if budget == "smoke" else 10
+    return Plan("table3", budget, {"table3": spec}, tuple(left_out), ("distances",), episodes)
+
+
+def _solvers(budget: Budget) -> Plan:
+    left_out = []
+    if budget == "smoke":
+        spec = SweepSpec(
+            algo=("oops-td3",),
+            num_demos=(10,),
+            config={**SMOKE_CONFIG, **_smoke_demos("Hopper-v5")},
+        )
+    elif budget == "small":
+        spec = SweepSpec(algo=("oops-td3",), num_demos=(10,), config=SMALL_CONFIG)
+        left_out.append("the other four tasks (the appendix's figure): the full budget")
+    else:
+        spec = SweepSpec(env=MUJOCO, algo=("oops-td3",), num_demos=(10,), config=FULL_CONFIG)
+    episodes = 2 if budget == "smoke" else 10
+    return Plan("solvers", budget, {"solvers": spec}, tuple(left_out), ("solvers",), episodes)
 
 
 TABLE3_ALGOS = ("opolo", "pwil-td3", "oops-td3")
@@ -280,9 +301,10 @@ EXPERIMENTS = {
     "table3": _table3,
     "table4": _table4,
     "calibration": _calibration,
+    "solvers": _solvers,
 }
-"""The experiments ``ilfo reproduce`` runs (the solver-vs-lambda figure is not among them
-yet)."""
+"""The experiments ``ilfo reproduce`` runs: the paper's Tables 1-4, its calibration figure and
+its solver-vs-lambda figure."""
 
 
 def reproduce(
@@ -315,6 +337,153 @@ def reproduce(
         run_sweep(sweep, backend_factory(), on_change=on_change)
     runs, skipped = collect_runs([root / sub for sub in the_plan.sweeps])
     report = build_report(runs, skipped=[*skipped, *the_plan.left_out])
-    return the_plan, write_report(
-        report, root / "report", sources=[f"ilfo reproduce {name} --budget {budget}"]
-    )
+    out = root / "report"
+    written = write_report(report, out, sources=[f"ilfo reproduce {name} --budget {budget}"])
+    if "distances" in the_plan.measures:
+        written += write_distances(runs, out, the_plan.measure_episodes)
+    if "solvers" in the_plan.measures:
+        written += write_solvers(runs, out, the_plan.measure_episodes)
+    return the_plan, written
+
+
+def _cached(run_dir: Path, name: str, compute: Any) -> dict[str, float]:
+    """``compute()``'s values for a run, kept in its directory as ``name`` (computed once)."""
+    import json
+
+    from ilfo.files import write_json_atomic
+
+    cache = run_dir / name
+    if cache.is_file():
+        return json.loads(cache.read_text())
+    values = compute()
+    write_json_atomic(cache, values)
+    return values
+
+
+def write_distances(runs: list[Any], out: Path, episodes: int = 10) -> list[Path]:
+    """Table 3: each run's distances (cached in its directory as distances.json), their mean
+    per task x algo x demos beside the paper's, as ``distances.csv`` and ``distances.md``."""
+
+    import numpy as np
+
+    from ilfo.experiments.distances import SPACES, run_distances
+    from ilfo.experiments.paper import paper_cells
+
+    per_cell: dict[tuple[str, str, int], list[dict[str, float]]] = {}
+    for run in runs:
+        values = _cached(
+            run.run_dir,
+            "distances.json",
+            lambda run=run: run_distances(run.run_dir, episodes=episodes, experts=episodes),
+        )
+        per_cell.setdefault((run.env, run.algo, run.num_demos), []).append(values)
+    paper = {(c.env, c.algo, c.space): c for c in paper_cells() if c.table == "table3"}
+    rows = []
+    for (env, algo, demos), values in per_cell.items():
+        row: dict[str, Any] = {"env": env, "algo": algo, "num_demos": demos, "seeds": len(values)}
+        for space in SPACES:
+            row[space] = float(np.mean([v[space] for v in values]))
+            cell = paper.get((env, algo, space))
+            row[f"paper {space}"] = None if cell is None else cell.mean
+        rows.append(row)
+    csv_path = out / "distances.csv"
+    _write_rows(csv_path, rows)
+    lines = [
+        "# Wasserstein distances of final rollouts to the expert (Table 3)",
+        "",
+        f"{episodes} deterministic fixed-horizon rollouts of each run's final policy against the "
+        f"first {episodes} expert trajectories of its demo file; exact W1 (network simplex) with "
+        "the Euclidean cost between raw atoms, the mean over all pairs, then over seeds. "
+        "ilfo's (the paper's).",
+        "",
+        "| task | algo | demos | seeds | (s) | (s, s') | (s, a) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        cells = " | ".join(
+            f"{row[s]:.2f}" + ("" if row[f"paper {s}"] is None else f" ({row[f'paper {s}']:.2f})")
+            for s in SPACES
+        )
+        lines.append(
+            f"| {row['env']} | {row['algo']} | {row['num_demos']} | {row['seeds']} | {cells} |"
+        )
+    md_path = out / "distances.md"
+    md_path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return [md_path, csv_path]
+
+
+def write_solvers(runs: list[Any], out: Path, episodes: int = 10) -> list[Path]:
+    """The solver figure: per run, the (s, s') transport costs of its final rollouts under each
+    coupling (cached in the run as solvers.json), as ``solvers.md``, ``solvers.csv`` and
+    ``solvers_<env>_<seed>.png``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ilfo.experiments.distances import SOLVER_LAMBDAS, final_rollouts, solver_distances
+
+    rows = []
+    for run in runs:
+        values = _cached(
+            run.run_dir,
+            "solvers.json",
+            lambda run=run: solver_distances(
+                *final_rollouts(run.run_dir, episodes=episodes, experts=episodes)
+            ),
+        )
+        rows.append({"env": run.env, "algo": run.algo, "seed": run.seed, **values})
+    csv_path = out / "solvers.csv"
+    _write_rows(csv_path, rows)
+    lines = [
+        "# Solvers: the (s, s') transport cost of final rollouts under each coupling",
+        "",
+        f"OOPS+TD3's final policy: {episodes} rollouts against the first {episodes} expert "
+        "trajectories; the cost <C, P> (Euclidean C between raw atoms) of the exact coupling "
+        "(simplex), PWIL's greedy one and Sinkhorn's at each lambda (with the share of its "
+        "solves that converged where not all did). Every coupling bounds the exact distance "
+        "from above: lower is tighter.",
+        "",
+        "| task | seed | W_simplex | W_greedy | "
+        + " | ".join(f"W_Sk({lam:g})" for lam in SOLVER_LAMBDAS)
+        + " |",
+        "|---|---|---|---|" + "---|" * len(SOLVER_LAMBDAS),
+    ]
+    md_path = out / "solvers.md"
+    written = [md_path, csv_path]
+    for row in rows:
+        sk = []
+        for lam in SOLVER_LAMBDAS:
+            share = row[f"converged({lam:g})"]
+            note = "" if share == 1 else f" ({share:.0%} converged)"
+            sk.append(f"{row[f'W_Sk({lam:g})']:.3f}{note}")
+        lines.append(
+            f"| {row['env']} | {row['seed']} | {row['W_simplex']:.3f} | {row['W_greedy']:.3f} "
+            f"| {' | '.join(sk)} |"
+        )
+        fig, ax = plt.subplots(figsize=(5, 3.5))
+        sinkhorn = [row[f"W_Sk({lam:g})"] for lam in SOLVER_LAMBDAS]
+        ax.plot(SOLVER_LAMBDAS, sinkhorn, "o-", label="W_Sk(lambda)")
+        ax.axhline(row["W_simplex"], color="orange", label="W_simplex")
+        ax.axhline(row["W_greedy"], color="red", label="W_greedy")
+        ax.set_xscale("log")
+        ax.set_xlabel("Sinkhorn lambda")
+        ax.set_ylabel("transport cost <C, P>")
+        ax.set_title(f"{row['env']} (seed {row['seed']})")
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        path = out / f"solvers_{row['env']}_{row['seed']}.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        written.append(path)
+    md_path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return written
+
+
+def _write_rows(path: Path, rows: list[dict[str, Any]]) -> None:
+    import csv
+
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]) if rows else ["env"])
+        writer.writeheader()
+        writer.writerows(rows)
