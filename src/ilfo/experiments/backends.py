@@ -27,6 +27,8 @@ from ilfo.experiments.sweep import RunStatus, Sweep, record_attempt, run_status,
 from ilfo.experiments.worker import PARENT_SIGNAL_ENV, thread_environment
 
 EXIT_DONE, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
+PROGRESS_SECONDS = 10.0
+"""How often the running runs' steps are read for the progress display."""
 
 
 class Job(Protocol):
@@ -218,6 +220,7 @@ def run_sweep(
     elsewhere = [name for name, s in statuses.items() if s.state == "running"]
     active: dict[int, Job] = {}  # slot -> job
     notify = on_change or (lambda statuses, message: None)
+    last_progress = time.monotonic()
 
     def refresh(name: str) -> RunStatus:
         statuses[name] = run_status(sweep, by_name[name])
@@ -251,6 +254,10 @@ def run_sweep(
                     elsewhere.remove(name)
                     if status.state == "pending":
                         queue.append(name)
+            if time.monotonic() - last_progress >= PROGRESS_SECONDS:  # the running runs' steps
+                for job in active.values():
+                    refresh(job.name)
+                last_progress = time.monotonic()
             notify(list(statuses.values()), "")
     except KeyboardInterrupt:
         for job in active.values():
