@@ -153,3 +153,54 @@ def test_sbx_algorithms_learn_from_the_relabelled_buffer(name):
     buffer = model.replay_buffer
     assert buffer.episodes_labelled > 10 and buffer.ready.any()
     assert np.all(np.abs(buffer.rewards) < TASK_REWARD / 10)
+
+
+class PointMass(gym.Env):
+    """x += 0.1 a for 50 steps from x = 0; the task reward is 0 (only OOPS teaches)."""
+
+    observation_space = gym.spaces.Box(-np.inf, np.inf, (1,), np.float32)
+    action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t, self.x = 0, np.zeros(1, np.float32)
+        return self.x.copy(), {}
+
+    def step(self, action):
+        self.t += 1
+        self.x = (self.x + 0.1 * np.clip(action, -1, 1)).astype(np.float32)
+        return self.x.copy(), 0.0, False, self.t >= 50, {}
+
+
+def test_sac_learns_to_imitate_from_the_relabelled_rewards():
+    """An expert that moves right at full speed, observed only; SB3's SAC learning from the
+    buffer's OOPS rewards alone halves (and more) its OT distance to the expert within 6,000
+    steps (measured: 0.82 for random actions, 0.24 learned)."""
+    from ilfo.rewards import OOPS
+
+    oops = OOPS([(0.1 * np.arange(51.0))[:, None]])
+
+    def distance(policy):
+        env = PointMass()
+        obs, _ = env.reset()
+        observations = [obs]
+        for _ in range(50):
+            obs, *_ = env.step(policy(obs))
+            observations.append(obs)
+        return oops(np.asarray(observations, np.float64)).distance
+
+    rng = np.random.default_rng(0)
+    random_distance = distance(lambda obs: rng.uniform(-1, 1, 1))
+    model = sb3.SAC(
+        "MlpPolicy",
+        PointMass(),
+        learning_starts=500,
+        replay_buffer_class=OTReplayBuffer,
+        replay_buffer_kwargs={"reward": oops},
+        policy_kwargs={"net_arch": [32, 32]},
+        seed=0,
+        device="cpu",
+    )
+    model.learn(6000)
+    learned = distance(lambda obs: model.predict(obs, deterministic=True)[0])
+    assert learned < 0.5 * random_distance, (learned, random_distance)
