@@ -135,7 +135,7 @@ def test_bad_settings_are_refused_clearly():
         )
 
 
-@pytest.mark.parametrize("name", ["SAC", "TD3"])
+@pytest.mark.parametrize("name", ["SAC", "TD3", "CrossQ"])
 def test_sbx_algorithms_learn_from_the_relabelled_buffer(name):
     sbx = pytest.importorskip("sbx")
     envs = [RandomLengthEnv(40 + j) for j in range(2)]
@@ -204,3 +204,34 @@ def test_sac_learns_to_imitate_from_the_relabelled_rewards():
     model.learn(6000)
     learned = distance(lambda obs: model.predict(obs, deterministic=True)[0])
     assert learned < 0.5 * random_distance, (learned, random_distance)
+
+
+def test_rewards_equal_the_oops_rewards_of_the_episode():
+    """With ilfo's OOPS as the episode reward, an ended episode's rows hold exactly
+    ``OOPS(demos)(observations).rewards``."""
+    from ilfo.rewards import OOPS
+
+    demo = np.cumsum(np.full((31, 3), 0.02), axis=0)
+    env = RandomLengthEnv(7)
+    model = sb3.TD3(
+        "MlpPolicy",
+        DummyVecEnv([lambda: env]),
+        buffer_size=500,
+        learning_starts=200,
+        policy_kwargs={"net_arch": [16]},
+        replay_buffer_class=OTReplayBuffer,
+        replay_buffer_kwargs={"reward": OOPS([demo])},
+        seed=0,
+        device="cpu",
+    )
+    model.learn(total_timesteps=150)
+    buffer, reference = model.replay_buffer, OOPS([demo])
+    row = 0
+    for observations in env.log[:-1]:  # every ended episode, in order from row 0
+        observations = np.asarray(observations, np.float64)
+        steps = len(observations) - 1
+        want = reference(observations).rewards
+        np.testing.assert_allclose(buffer.rewards[row : row + steps, 0], want, rtol=1e-5)
+        assert buffer.ready[row : row + steps, 0].all()
+        row += steps
+    assert row > 50
