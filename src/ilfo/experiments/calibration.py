@@ -121,6 +121,8 @@ def write_calibration(results: dict[str, list[CalibrationPoint]], out: Path) -> 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from ilfo.experiments.report import finish_figure
+
     out.mkdir(parents=True, exist_ok=True)
     written = []
     csv_path = out / "calibration.csv"
@@ -174,16 +176,10 @@ def write_calibration(results: dict[str, list[CalibrationPoint]], out: Path) -> 
                 c="k",
                 label=name,
             )
-        ax.set_title(f"{env}: Spearman {spearman(points):.2f}")
-        ax.set_xlabel("task score (falls zeroed)")
-        ax.set_ylabel("proxy return (sum of OOPS rewards)")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
-        fig.tight_layout()
+        title = f"{env}: Spearman {spearman(points):.2f}"
         path = out / f"calibration_{env}.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        written.append(path)
+        xlabel, ylabel = "task score (falls zeroed)", "proxy return (sum of OOPS rewards)"
+        written.append(finish_figure(fig, ax, title, xlabel, ylabel, path))
     md_path = out / "calibration.md"
     md_path.write_text("\n".join(lines), encoding="utf-8")
     return [md_path, *written]

@@ -504,12 +504,13 @@ def _plot_curves(report: Report, out: Path) -> list[Path]:
             ax.fill_between(steps, low, high, alpha=0.2)
         title = f"{env}: mean over seeds, 95% bootstrap band"
         path = out / f"curves_{env}.png"
-        figures.append(_finish(fig, ax, title, "environment steps", "normalised score", path))
+        figures.append(finish_figure(fig, ax, title, "environment steps", "normalised score", path))
     return figures
 
 
-def _finish(fig: Any, ax: Any, title: str, xlabel: str, ylabel: str, path: Path) -> Path:
-    """Label, save and close a report figure."""
+def finish_figure(fig: Any, ax: Any, title: str, xlabel: str, ylabel: str, path: Path) -> Path:
+    """Label, save and close a report figure (every figure of ``ilfo report`` and
+    ``ilfo reproduce``)."""
     import matplotlib.pyplot as plt
 
     ax.set_title(title)
@@ -545,5 +546,5 @@ def _plot_profiles(report: Report, out: Path) -> list[Path]:
         title = f"Performance profile, {demos} demo{'s' * (demos > 1)}"
         path = out / f"profile_{demos}demos.png"
         ylabel = "fraction of runs with score > tau"
-        figures.append(_finish(fig, ax, title, "normalised score tau", ylabel, path))
+        figures.append(finish_figure(fig, ax, title, "normalised score tau", ylabel, path))
     return figures

@@ -422,6 +422,7 @@ def write_solvers(runs: list[Any], out: Path, episodes: int = 10) -> list[Path]:
     import matplotlib.pyplot as plt
 
     from ilfo.experiments.distances import SOLVER_LAMBDAS, final_rollouts, solver_distances
+    from ilfo.experiments.report import finish_figure
 
     rows = []
     for run in runs:
@@ -467,15 +468,11 @@ def write_solvers(runs: list[Any], out: Path, episodes: int = 10) -> list[Path]:
         ax.axhline(row["W_simplex"], color="orange", label="W_simplex")
         ax.axhline(row["W_greedy"], color="red", label="W_greedy")
         ax.set_xscale("log")
-        ax.set_xlabel("Sinkhorn lambda")
-        ax.set_ylabel("transport cost <C, P>")
-        ax.set_title(f"{row['env']} (seed {row['seed']})")
-        ax.legend(fontsize=7)
-        fig.tight_layout()
+        title = f"{row['env']} (seed {row['seed']})"
         path = out / f"solvers_{row['env']}_{row['seed']}.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        written.append(path)
+        written.append(
+            finish_figure(fig, ax, title, "Sinkhorn lambda", "transport cost <C, P>", path)
+        )
     md_path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return written
 
