@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-import ot as pot
 from ilfo.ot._checks import check_problem
 from ilfo.ot.result import OTResult, make_result
 
@@ -27,6 +26,8 @@ def emd(
         An :class:`OTResult` with the exact plan and the dual potentials; ``iterations`` is None
         (POT does not report it); ``converged`` is False if the pivot limit was hit.
     """
+    import ot as pot  # here, not at import: POT's backends import torch, TF, ... where installed
+
     cost, a, b = check_problem(cost, a, b)
     # POT rescales b to a's mass with a warning if they differ by rounding; make them agree.
     b = b * (a.sum() / b.sum())
