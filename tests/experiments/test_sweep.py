@@ -3,6 +3,7 @@ bookkeeping (with a fake backend), and one real local sweep killed and started a
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -106,6 +107,9 @@ def test_manifest_round_trip_and_a_different_spec_refused(tmp_path):
     again = open_sweep(tmp_path / "s")
     assert again.spec == spec and again.runs == sweep.runs
     assert create_sweep(tmp_path / "s", spec).runs == sweep.runs  # same spec: the same sweep
+    more = dataclasses.replace(spec, retries=5)  # retries alone may change
+    assert create_sweep(tmp_path / "s", more).runs == sweep.runs
+    assert open_sweep(tmp_path / "s").spec.retries == 5
     with pytest.raises(ValueError, match="holds another sweep"):
         create_sweep(tmp_path / "s", SweepSpec(config=TINY))
     with pytest.raises(FileNotFoundError, match="not a sweep directory"):

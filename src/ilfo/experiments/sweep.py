@@ -251,17 +251,23 @@ class Sweep:
 
 def create_sweep(root: str | Path, spec: SweepSpec) -> Sweep:
     """Write the manifest of ``spec`` to ``root`` (made if missing). A directory that holds a
-    sweep already is reused only for the same spec (``open_sweep`` continues it)."""
+    sweep already is reused only for the same spec, whose ``retries`` alone may change
+    (``open_sweep`` continues it as it is)."""
     root = Path(root)
     runs = tuple(expand(spec))
     manifest = root / MANIFEST_FILE
     if manifest.exists():
         existing = open_sweep(root)
-        if existing.spec != spec:
+        if dataclasses.replace(existing.spec, retries=spec.retries) != spec:
             raise ValueError(
                 f"{root} holds another sweep (its spec differs from this one); continue it "
                 "with `ilfo sweep run` and no spec, or choose a new directory"
             )
+        if existing.spec.retries != spec.retries:  # the one setting a sweep may change
+            raw = read_settings_file(manifest)
+            raw["spec"]["retries"] = spec.retries
+            write_json_atomic(manifest, raw)
+            existing = Sweep(root, spec, existing.runs)
         return existing
     root.mkdir(parents=True, exist_ok=True)
     for sub in (RUNS_DIR, ATTEMPTS_DIR, LOGS_DIR):
