@@ -74,6 +74,7 @@ def test_rows_rewritten_are_exactly_each_episode():
     model, envs = _train(seed=0)
     buffer = model.replay_buffer
     assert buffer.full  # 300 steps in 40 rows per env: the ring wrapped many times
+    assert buffer.ready_count == buffer.ready.sum()
     writes = model.num_timesteps // len(envs)  # steps stored per env column
     for j, env in enumerate(envs):
         # env j's transitions in order, each with its episode's label (None while running)

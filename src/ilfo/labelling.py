@@ -129,12 +129,11 @@ def label_episodes(
     processes (1: in this process). ``on_progress(n)`` after each chunk of n episodes."""
     config = config or LabelConfig()
     demos = [np.asarray(d, np.float64) for d in demos]
-    EpisodeLabeller(demos, config)  # bad settings fail here, not in a worker
+    labeller = EpisodeLabeller(demos, config)  # bad settings fail here, not in a worker
     if workers <= 1:
-        _init_worker(demos, config)
         out = []
         for obs in episodes:
-            out.append(_WORKER["labeller"](obs))
+            out.append(labeller(obs))
             if on_progress:
                 on_progress(1)
         return out

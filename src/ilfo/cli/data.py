@@ -265,28 +265,12 @@ def _add_label_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="processes labelling episodes (default: the CPUs this process may use)",
     )
-    for f in fields(LabelConfig):
-        if f.name == "oops":
-            continue
-        docs = {"squashing": ["oops", "linear", "exponential"]}
-        kwargs: dict = {"choices": docs[f.name]} if f.name in docs else {"type": type(f.default)}
-        p.add_argument(
-            f"--{f.name.replace('_', '-')}",
-            default=f.default,
-            help=f"{_field_doc(LabelConfig, f.name)} (default {f.default})",
-            **kwargs,
-        )
+    add_dataclass_arguments(p, LabelConfig)  # the oops field, a dataclass, gets its group
     group = p.add_argument_group("the OT problem (OOPS's settings)")
     add_dataclass_arguments(
         group, OOPSConfig, ("demo_selection", "seed", "warm_start", "reward_scale"), prefix="oops"
     )
     p.set_defaults(run=_run_label)
-
-
-def _field_doc(cls: type, name: str) -> str:
-    from ilfo.config import field_docs
-
-    return field_docs(cls).get(name, "").replace("%", "%%")
 
 
 def _run_label(args: argparse.Namespace) -> int:
@@ -298,9 +282,7 @@ def _run_label(args: argparse.Namespace) -> int:
     from ilfo.labelling import LabelConfig, label_dataset
 
     oops = OOPSConfig(**overrides_from_args(args, OOPSConfig, prefix="oops"))
-    config = LabelConfig(
-        oops=oops, squashing=args.squashing, alpha=args.alpha, beta=args.beta, top_k=args.top_k
-    )
+    config = LabelConfig(oops=oops, **overrides_from_args(args, LabelConfig))
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     workers = args.workers or cpus or 1
     if workers < 1:

@@ -64,9 +64,7 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
 
 def _train_settings(rest: list[str]) -> dict[str, Any]:
     """The `ilfo train` flags among a sweep's arguments, as sweep-config settings."""
-    from ilfo.algos import PART_CONFIGS
-    from ilfo.cli.train import _add_train_parser
-    from ilfo.files import read_settings_file
+    from ilfo.cli.train import _add_train_parser, part_flags, settings_from_args
     from ilfo.training import TrainConfig
 
     parser = argparse.ArgumentParser(prog="ilfo sweep run DIR [ilfo train flags]")
@@ -74,17 +72,10 @@ def _train_settings(rest: list[str]) -> dict[str, Any]:
     args = parser.parse_args(["train", *rest])
     if args.resume is not None:
         raise ValueError("ilfo sweep run resumes its runs itself: drop --resume")
-    settings: dict[str, Any] = {}
-    if args.config is not None:
-        settings = read_settings_file(args.config)
-        for key in ("env", "algo", "num_demos", "seed", "out"):
-            settings.pop(key, None)  # the sweep's axes and directory decide these
-    settings.update(overrides_from_args(args, TrainConfig))
-    for name, cls in PART_CONFIGS.items():
-        given = overrides_from_args(args, cls, prefix=name)
-        if given:
-            settings[name] = {**(settings.get(name) or {}), **given}
-    return {k: v for k, v in settings.items() if v is not None or k not in PART_CONFIGS}
+    # The sweep's axes and directory decide these, whatever the config file says.
+    drop = ("env", "algo", "num_demos", "seed", "out")
+    overrides = overrides_from_args(args, TrainConfig)
+    return settings_from_args(args.config, overrides, part_flags(args), drop)
 
 
 def _spec_from_args(args: argparse.Namespace, rest: list[str]) -> Any:

@@ -71,34 +71,57 @@ def _show(value: object) -> str:
     return " ".join(map(str, value)) if isinstance(value, tuple) else str(value)
 
 
+def settings_from_args(
+    config_file: str | None,
+    overrides: dict[str, Any],
+    groups: dict[str, dict[str, Any]],
+    drop: tuple[str, ...] = (),
+) -> dict[str, Any]:
+    """Settings (``config_from_settings``'s input) from the settings of ``config_file`` (if
+    any; its keys in ``drop`` left out, and its parts that are None), changed by the flags
+    given (``overrides``: TrainConfig fields; ``groups``: single fields of a part, by name)."""
+    from ilfo.algos import PART_CONFIGS
+    from ilfo.files import read_settings_file
+
+    settings: dict[str, Any] = {}
+    if config_file is not None:
+        settings = read_settings_file(config_file)
+        settings = {
+            k: v
+            for k, v in settings.items()
+            if k not in drop and not (k in PART_CONFIGS and v is None)
+        }
+    settings.update(overrides)
+    for name, given in groups.items():
+        settings[name] = {**(settings.get(name) or {}), **given}
+    return settings
+
+
 def config_from_args(
     config_file: str | None, overrides: dict[str, Any], groups: dict[str, dict[str, Any]]
 ) -> TrainConfig:
-    """The run's config: the settings of ``config_file`` (if any), changed by the flags given
-    (``overrides``: TrainConfig fields; ``groups``: single fields of a part, by part name)."""
-    from ilfo.files import read_settings_file
+    """The run's config: ``settings_from_args`` built into a ``TrainConfig``."""
     from ilfo.training import config_from_settings
 
-    settings: dict[str, Any] = {}
-    source = "the command line"
-    if config_file is not None:
-        settings = read_settings_file(config_file)
-        source = f"{config_file} and the command line"
-    settings = {**settings, **overrides}
-    for name, given in groups.items():
-        settings[name] = {**(settings.get(name) or {}), **given}
-    return config_from_settings(settings, source)
+    source = "the command line" if config_file is None else f"{config_file} and the command line"
+    return config_from_settings(settings_from_args(config_file, overrides, groups), source)
 
 
-def _run_train(args: argparse.Namespace) -> int:
+def part_flags(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
+    """The part flags given (``--td3-*``, ``--oops-*``, ...), as {part: {field: value}}."""
     from ilfo.algos import PART_CONFIGS
-    from ilfo.training import TrainConfig, Trainer, create_run_dir, run_name
 
-    overrides = overrides_from_args(args, TrainConfig)
     groups = {
         name: overrides_from_args(args, cls, prefix=name) for name, cls in PART_CONFIGS.items()
     }
-    groups = {name: given for name, given in groups.items() if given}
+    return {name: given for name, given in groups.items() if given}
+
+
+def _run_train(args: argparse.Namespace) -> int:
+    from ilfo.training import TrainConfig, Trainer, create_run_dir, run_name
+
+    overrides = overrides_from_args(args, TrainConfig)
+    groups = part_flags(args)
     if args.resume:
         extra = [flag_name(k) for k in overrides if k != "steps"]
         extra += [flag_name(k, name) for name, given in groups.items() for k in given]

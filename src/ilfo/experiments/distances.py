@@ -72,7 +72,7 @@ def distances(
     return out
 
 
-def expert_trajectories(demo_file: str | Path, limit: int = 10) -> list[Trajectory]:
+def demo_trajectories(demo_file: str | Path, limit: int = 10) -> list[Trajectory]:
     """The first ``limit`` demos of a file, with their actions (a clear error without)."""
     from ilfo import demos
 
@@ -102,7 +102,7 @@ def final_rollouts(
     finally:
         env.close()
     demo_file = config.demos or default_demos_path(config.env)
-    return rollouts, expert_trajectories(demo_file, experts)
+    return rollouts, demo_trajectories(demo_file, experts)
 
 
 def run_distances(

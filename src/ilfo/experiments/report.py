@@ -87,8 +87,10 @@ def collect_runs(paths: Iterable[str | Path]) -> tuple[list[RunResult], list[str
         candidates = [given] if _is_run_dir(given) else []
         candidates += [p.parent for p in given.rglob("config.json")]
         for path in candidates:
-            inside_sweep = path.parent.name == RUNS_DIR and (path.parent.parent / MANIFEST_FILE)
-            if _is_run_dir(path) and not (inside_sweep and inside_sweep.is_file()):
+            in_sweep = (
+                path.parent.name == RUNS_DIR and (path.parent.parent / MANIFEST_FILE).is_file()
+            )
+            if _is_run_dir(path) and not in_sweep:  # a sweep's runs come with their variants
                 found.setdefault(path.resolve(), None)
     runs, skipped = [], []
     for run_dir, variant in sorted(found.items()):
@@ -110,6 +112,8 @@ def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | Non
 
     run_dir = Path(run_dir)
     config = read_run_config(run_dir)
+    if not (run_dir / "metrics.csv").is_file():  # a sweep's run before its first episode
+        return None
     rows = [r for r in read_metrics(run_dir) if r.get(SCORE)]
     if not rows:
         return None

@@ -102,6 +102,8 @@ class OTReplayBuffer(ReplayBuffer):
         self.observation_columns = observation_columns
         self.ready = np.zeros((self.buffer_size, self.n_envs), dtype=bool)
         """Rows (row, env) whose rewards are their episode's: the only ones sampled."""
+        self.ready_count = 0
+        """``ready.sum()``, kept as rows change (``sample`` runs every gradient step)."""
         self.episode_steps = np.zeros(self.n_envs, dtype=np.int64)
         """Steps of each env's running episode stored so far."""
         self.episodes_labelled = 0
@@ -116,6 +118,7 @@ class OTReplayBuffer(ReplayBuffer):
         infos: list[dict[str, Any]],
     ) -> None:
         row = self.pos
+        self.ready_count -= int(self.ready[row].sum())
         self.ready[row] = False  # a row written again belongs to a new, running episode
         super().add(obs, next_obs, action, np.zeros_like(reward), done, infos)
         self.episode_steps += 1
@@ -138,6 +141,7 @@ class OTReplayBuffer(ReplayBuffer):
                 f"the reward gave {rewards.shape[0]} rewards for an episode of {steps} steps"
             )
         self.rewards[rows, env] = rewards
+        self.ready_count += steps  # the running episode's rows: none was ready
         self.ready[rows, env] = True
         self.episodes_labelled += 1
 
@@ -145,7 +149,7 @@ class OTReplayBuffer(ReplayBuffer):
         """``batch_size`` transitions drawn uniformly from the ready rows."""
         filled = self.buffer_size if self.full else self.pos
         ready = self.ready[:filled]
-        count = int(ready.sum())
+        count = self.ready_count
         if count == 0:
             raise ValueError(
                 "no episode has ended yet, so no transition has its reward: set the "
