@@ -27,15 +27,19 @@ def test_help_lists_every_agent_and_rewarder_flag_with_its_doc(capsys):
         ("--oops-reg", "Sinkhorn's absolute entropic regularisation lambda. (default: 0.05)"),
         ("--oops-demo-selection", "With several demos"),
         ("--pwil-alpha", "Reward amplitude alpha. (default: 5.0)"),
+        ("--trpo-max-kl", "(default: 0.1)"),
+        ("--sil-expert-subsample", "(default: 20)"),
+        ("--oops-adv-critic-every", "(default: 1)"),
     ]:
         assert flag in out and doc in out, flag
     assert (
-        "TD3/DDPG agent (oops-td3, oops-ddpg, pwil-td3, gaifo-td3, td3; overrides the --preset)"
-        in out
+        "TD3/DDPG agent (oops-td3, oops-ddpg, pwil-td3, oops-adv-td3, gaifo-td3, td3; overrides "
+        "the --preset)" in out
     )
     assert "OOPS rewarder (oops-td3, oops-ddpg, oops-sac)" in out
     # Set by the trainer, so not flags.
     assert "--td3-max-time" not in out and "--oops-seed" not in out
+    assert "--sil-seed" not in out and "--oops-adv-seed" not in out
 
 
 def test_prefixed_flags_do_not_collide_and_none_is_a_value():

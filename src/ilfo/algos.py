@@ -25,6 +25,7 @@ import numpy as np
 
 from ilfo.agents import SACConfig, TD3Config, ddpg_config, make_sac, make_td3
 from ilfo.agents.opolo import OPOLOConfig, make_opolo
+from ilfo.agents.trpo import TRPOConfig, make_trpo
 from ilfo.rewards import (
     FIRL,
     OOPS,
@@ -37,6 +38,8 @@ from ilfo.rewards import (
     OOPSConfig,
     PWILConfig,
 )
+from ilfo.rewards.oops_adv import AdversarialOOPS, AdversarialOOPSConfig
+from ilfo.rewards.sil import SIL, SILConfig
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -209,6 +212,16 @@ AGENT_PARTS: dict[str, AgentPart] = {
         description="Defaults: the authors' code (opolo.yml; Hopper: lr 1e-4, alpha 0.01, "
         "pi-reg-coef 0.01).",
     ),
+    "trpo": AgentPart(
+        config=TRPOConfig,
+        make=make_trpo,
+        default=lambda preset: TRPOConfig(),
+        for_run=lambda config, horizon, fixed_horizon: config,
+        title="TRPO agent (on-policy)",
+        description="Defaults: the SIL authors' TRPO (Khrylx/PyTorch-RL as SIL ran it). It "
+        "learns from batches of its own episodes: --start-steps, --updates-per-step and "
+        "--replay-capacity do not apply.",
+    ),
 }
 """The agents, by the name of their ``TrainConfig`` field."""
 
@@ -255,6 +268,22 @@ REWARD_PARTS: dict[str, RewardPart | LearnedRewardPart] = {
         title="PWIL rewarder",
         description="Defaults: the paper's.",
     ),
+    "sil": RewardPart(
+        config=SILConfig,
+        make=SIL,
+        title="SIL-(s,s') reward (adversarial critic)",
+        description="Defaults: the SIL authors' code (docs/notes/sil-spec.md). Set by the "
+        "trainer: seed.",
+        set_by_trainer=("seed",),
+    ),
+    "oops_adv": RewardPart(
+        config=AdversarialOOPSConfig,
+        make=AdversarialOOPS,
+        title="OOPS_adv reward (OOPS with SIL's adversarial cost)",
+        description="Defaults: OOPS's coupling and scale, SIL's critic; the critic's schedule "
+        "is ilfo's (the paper gives none). Set by the trainer: seed.",
+        set_by_trainer=("seed",),
+    ),
     "discriminator": LearnedRewardPart(
         config=DiscriminatorConfig,
         make=Discriminator,
@@ -278,6 +307,19 @@ RECIPES: tuple[Recipe, ...] = (
     Recipe("oops-ddpg", "td3", "oops", "OOPS reward + DDPG", adapt_agent=ddpg_config),
     Recipe("oops-sac", "sac", "oops", "OOPS reward + SAC"),
     Recipe("pwil-td3", "td3", "pwil", "PWIL-(s) reward + TD3 (the paper's PWIL baseline)"),
+    Recipe(
+        "oops-adv-td3",
+        "td3",
+        "oops_adv",
+        "OOPS_adv: OOPS with SIL's learned adversarial cosine cost + TD3 (the paper's Table 4)",
+    ),
+    Recipe(
+        "sil",
+        "trpo",
+        "sil",
+        "SIL-(s,s'): Sinkhorn imitation with an adversarial critic's cost + TRPO (Papagiannis "
+        "& Li)",
+    ),
     Recipe(
         "gaifo-td3",
         "td3",

@@ -165,3 +165,24 @@ def test_report_reads_sweep_variants_and_percent_differences(tmp_path):
     assert variant.paper == paper_ablation("Hopper-v5", "lambda_0.1")
     with pytest.raises(FileNotFoundError):
         collect_runs([tmp_path / "missing"])
+
+
+def test_table4_algos_are_compared_with_oops_td3(tmp_path):
+    for name, algo, final in (
+        ("o", "oops-td3", 0.8),
+        ("a", "oops-adv-td3", 0.6),
+        ("s", "sil", 0.2),
+    ):
+        _fake_run(tmp_path, name, env="Hopper-v5", algo=algo, seed=0, scores=[0.1, final])
+    _fake_run(tmp_path, "p", env="Hopper-v5", algo="pwil-td3", seed=0, scores=[0.5])
+    report = build_report(collect_runs([tmp_path])[0], resamples=200)
+    adv = report.cell("Hopper-v5", "oops-adv-td3", 1)
+    assert report.percent_difference(adv) == pytest.approx(100 * (0.6 - 0.8) / 0.8)
+    sil = report.cell("Hopper-v5", "sil", 1)
+    assert report.percent_difference(sil) == pytest.approx(100 * (0.2 - 0.8) / 0.8)
+    assert sil.paper is not None and sil.paper.mean == pytest.approx(0.17)  # Table 1's row
+    assert report.percent_difference(report.cell("Hopper-v5", "pwil-td3", 1)) is None
+    write_report(report, tmp_path / "report", sources=[str(tmp_path)])
+    text = (tmp_path / "report" / "report.md").read_text()
+    paper = paper_ablation("Hopper-v5", "oops_adv")
+    assert f"| Hopper-v5 | oops-adv-td3 | 1 | oops_adv | -25.0 | {paper.text} |" in text

@@ -10,6 +10,7 @@ import pytest
 from ilfo.algos import ALGOS
 from ilfo.cli import main
 from ilfo.experiments.paper import paper_cells
+from ilfo.experiments.report import TABLE4_ALGOS
 from ilfo.experiments.reproduce import ABLATIONS, BUDGETS, EXPERIMENTS, TABLE1_ALGOS, plan
 
 
@@ -33,9 +34,10 @@ def test_plans_leave_out_what_is_not_built_and_follow_the_paper():
     missing = [a for a in TABLE1_ALGOS if a not in ALGOS]
     assert all(any(a in line for line in table1.left_out) for a in missing)
     paper_variants = {c.variant for c in paper_cells() if c.table == "table4"}
-    assert set(ABLATIONS) == paper_variants
+    assert set(ABLATIONS) | set(TABLE4_ALGOS.values()) == paper_variants
     table4 = plan("table4", "full")
     assert set(table4.sweeps["variants"].variants) == {k for k, v in ABLATIONS.items() if v}
+    assert set(table4.sweeps["algos"].algo) == set(TABLE4_ALGOS)  # OOPS_adv and SIL: algos
     with pytest.raises(ValueError, match="unknown experiment"):
         plan("table9", "small")
     with pytest.raises(ValueError, match="budget"):

@@ -31,6 +31,11 @@ SCORE = "eval_score_norm"
 RETURN = "eval_return_norm"
 
 
+TABLE4_ALGOS: dict[str, str] = {"oops-adv-td3": "oops_adv", "sil": "sil"}
+"""Algos that are rows of the paper's Table 4 (by its variant key) though not changes of
+OOPS's settings: a report compares each with OOPS+TD3 on the same task and demos."""
+
+
 @dataclass(frozen=True)
 class RunResult:
     """What a report reads of one run."""
@@ -196,11 +201,13 @@ class Report:
 
     def percent_difference(self, cell: Cell) -> float | None:
         """A variant's mean final score relative to its default (the same task, algo and
-        demos without a variant), in percent, as the paper's Table 4; None without one."""
-        if cell.variant is None:
+        demos without a variant), in percent, as the paper's Table 4; for an algo that is a
+        row of Table 4 (``TABLE4_ALGOS``), relative to OOPS+TD3's; None without one."""
+        if cell.variant is None and cell.algo not in TABLE4_ALGOS:
             return None
+        base_algo = cell.algo if cell.variant else "oops-td3"
         try:
-            base = self.cell(cell.env, cell.algo, cell.num_demos)
+            base = self.cell(cell.env, base_algo, cell.num_demos)
         except KeyError:
             return None
         return 100 * (cell.mean - base.mean) / abs(base.mean) if base.mean else None
@@ -424,7 +431,11 @@ def write_report(report: Report, out: str | Path, *, sources: Sequence[str] = ()
             f"{_fmt(c.mean)} ± {_fmt(c.std)} | {c.iqm} | {_fmt(row['return_norm_mean'])} | "
             f"{paper} | {c.versus_paper} |"
         )
-    variants = [(c, report.percent_difference(c)) for c in report.cells if c.variant]
+    variants = [
+        (c, report.percent_difference(c))
+        for c in report.cells
+        if c.variant or (c.algo in TABLE4_ALGOS and report.percent_difference(c) is not None)
+    ]
     if variants:
         lines += [
             "",
@@ -434,9 +445,11 @@ def write_report(report: Report, out: str | Path, *, sources: Sequence[str] = ()
             "|---|---|---|---|---|---|",
         ]
         for c, diff in variants:
-            paper = "" if c.paper is None else c.paper.text
+            variant = c.variant or TABLE4_ALGOS[c.algo]
+            paper_cell = c.paper if c.variant else paper_ablation(c.env, variant)
+            paper = "" if paper_cell is None else paper_cell.text
             lines.append(
-                f"| {c.env} | {c.algo} | {c.num_demos} | {c.variant} | {_fmt(diff, 1)} | {paper} |"
+                f"| {c.env} | {c.algo} | {c.num_demos} | {variant} | {_fmt(diff, 1)} | {paper} |"
             )
     lines += [
         "",

@@ -40,11 +40,12 @@ ABLATIONS: dict[str, dict[str, Any] | None] = {
     "w2_l2": {"oops": {"metric": "sqeuclidean"}},
     "w1_l2": {"oops": {"metric": "euclidean"}},
     "w1_cos": {"oops": {"metric": "cosine"}},
-    "oops_adv": None,  # OOPS with SIL's adversarial cost: not built yet (its own issue)
-    "sil": None,  # SIL itself, a Table 1 algo
 }
 """Table 4's variants of OOPS+TD3 (keys as data/paper/results.json's ``variant_key``), each a
 change of the OOPS reward's settings; None: not built yet."""
+TABLE4_ALGOS: tuple[str, ...] = ("oops-adv-td3", "sil")
+"""Table 4's other rows, algos of their own (OOPS_adv, SIL): the report compares each with
+OOPS+TD3 (``report.TABLE4_ALGOS``)."""
 
 SMOKE_CONFIG: dict[str, Any] = {
     "horizon": 100,
@@ -229,6 +230,10 @@ def _table4(budget: Budget) -> Plan:
         "default": SweepSpec(algo=("oops-td3",), config=config, **axes),
         "variants": SweepSpec(algo=("oops-td3",), config=config, variants=variants, **axes),
     }
+    algos, not_built = _built(TABLE4_ALGOS)
+    left_out[:0] = not_built
+    if algos:
+        sweeps["algos"] = SweepSpec(algo=algos, config=config, **axes)
     return Plan("table4", budget, sweeps, tuple(left_out))
 
 

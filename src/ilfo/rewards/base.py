@@ -66,6 +66,17 @@ class EpisodeReward(Protocol):
     def load_state(self, state: RewardState) -> None: ...
 
 
+class BatchLearningReward(EpisodeReward, Protocol):
+    """An episode reward that learns once per batch of an on-policy agent (SIL's adversarial
+    critic): it rewards each episode as it ends, with its parameters of the time, and the loop
+    calls ``end_batch`` when the agent has learned from the batch those episodes make."""
+
+    def end_batch(self) -> dict[str, float]:
+        """Learn from the episodes rewarded since the last call and forget them; returns
+        metrics (``reward_loss``, ...), none where no episode was pending."""
+        ...
+
+
 @dataclass(frozen=True)
 class Standardizer:
     """Per-dimension affine map s -> (s - mean) / scale, fitted on expert states only.

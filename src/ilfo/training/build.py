@@ -20,6 +20,7 @@ import numpy as np
 
 from ilfo import demos as demo_io
 from ilfo.agents import AgentFunctions
+from ilfo.agents.base import OnPolicyAgentFunctions
 from ilfo.algos import AGENT_PARTS, REWARD_PARTS, LearnedRewardPart, RewardPart
 from ilfo.envs import make_env
 from ilfo.paths import DATA_DIR
@@ -32,8 +33,14 @@ class Agent(NamedTuple):
     """An agent's functions as a run uses them, and whether its observations end with the time
     feature remaining_steps / horizon (fixed-horizon runs: ``rollout.agent_observations``)."""
 
-    functions: AgentFunctions
+    functions: AgentFunctions | OnPolicyAgentFunctions
     time_feature: bool
+
+    @property
+    def on_policy(self) -> bool:
+        """Whether the agent learns from batches of its own fresh episodes (TRPO) rather than
+        from a replay buffer."""
+        return hasattr(self.functions, "learn")
 
 
 class EnvInfo(NamedTuple):

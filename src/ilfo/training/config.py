@@ -13,9 +13,12 @@ from typing import Any, Literal
 
 from ilfo.agents import SACConfig, TD3Config
 from ilfo.agents.opolo import OPOLOConfig
+from ilfo.agents.trpo import TRPOConfig
 from ilfo.algos import AGENT_PARTS, ALGOS, PART_CONFIGS, Recipe, algos_using, recipe
 from ilfo.config import dataclass_from_dict
 from ilfo.rewards import DiscriminatorConfig, FIRLConfig, OOPSConfig, PWILConfig
+from ilfo.rewards.oops_adv import AdversarialOOPSConfig
+from ilfo.rewards.sil import SILConfig
 
 Algo = Literal[tuple(ALGOS)]  # type: ignore[valid-type]
 """The names of ``ilfo.algos.ALGOS``, made from the registry (the CLI's ``--algo`` choices)."""
@@ -38,10 +41,12 @@ class TrainConfig:
     steps: int = 1_000_000
     """Environment steps in total (random ones included)."""
     start_steps: int = 10_000
-    """Uniformly random steps before the policy acts."""
+    """Uniformly random steps before the policy acts (off-policy agents only: TRPO acts from
+    the first step)."""
     updates_per_step: int = 1
     """Agent updates per environment step collected (the update-to-data ratio), run after each
-    episode; 1 is the paper's. More spends compute to learn more from the same data."""
+    episode; 1 is the paper's. More spends compute to learn more from the same data. Off-policy
+    agents only (TRPO learns once per batch: ``--trpo-batch-steps``)."""
     preset: Literal["paper", "fast"] = "paper"
     """TD3/DDPG hyperparameters: paper (critics 1024-1024) or fast (critics 256-256); ``td3``
     (the --td3-* flags) changes single ones."""
@@ -72,7 +77,7 @@ class TrainConfig:
     checkpoint (or the start), so that a crash loses at most that much of any run, short runs
     included; 0 turns the clock off (steps only)."""
     replay_capacity: int = 1_000_000
-    """Replay buffer size in transitions."""
+    """Replay buffer size in transitions (off-policy agents; TRPO keeps only its batch)."""
     out: str = "runs"
     """Parent directory of the run directory."""
     td3: TD3Config | None = None
@@ -97,6 +102,12 @@ class TrainConfig:
     authors' settings (``DiscriminatorConfig()`` at the agent's learning rate)."""
     firl: FIRLConfig | None = None
     """f-IRL's reward (algo firl-fkl); None: the authors' settings for the env."""
+    trpo: TRPOConfig | None = None
+    """TRPO agent (algo sil), on-policy; None: the SIL authors' settings (``TRPOConfig()``)."""
+    sil: SILConfig | None = None
+    """SIL-(s,s')'s reward (algo sil); None: the authors' settings (``SILConfig()``)."""
+    oops_adv: AdversarialOOPSConfig | None = None
+    """OOPS_adv's reward (algo oops-adv-td3); None: ``AdversarialOOPSConfig()``."""
 
     def __post_init__(self) -> None:
         algo = recipe(self.algo)
@@ -181,7 +192,7 @@ class TrainConfig:
             given = dataclasses.replace(given, seed=self.seed)
         return given
 
-    def agent_config(self, horizon: int) -> TD3Config | SACConfig | OPOLOConfig:
+    def agent_config(self, horizon: int) -> TD3Config | SACConfig | OPOLOConfig | TRPOConfig:
         """The agent's config exactly as the run builds it, for episodes of ``horizon`` steps:
         what the trainer sets (``AgentPart.for_run``: TD3's ``max_time`` is the horizon, time
         augmentation only where observations carry the time feature), then the recipe's change

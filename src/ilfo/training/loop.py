@@ -26,6 +26,7 @@ import jax
 import numpy as np
 
 from ilfo.agents import policy_of
+from ilfo.agents.base import OnPolicyBatch
 from ilfo.files import write_json_atomic
 from ilfo.replay import ReplayBuffer
 from ilfo.rewards import RewardOutput
@@ -43,6 +44,7 @@ from ilfo.training.plots import plot_runs
 from ilfo.training.rollout import (
     agent_observation,
     agent_observations,
+    env_action,
     rollout_policy,
     score_policy,
 )
@@ -111,9 +113,7 @@ class Trainer:
         self.rewarder = make_reward(config, self.demos)
         self.agent = make_agent(config, env, self.demos)
         self.state = self.agent.functions.init(config.seed)
-        self.buffer = ReplayBuffer(
-            config.replay_capacity, env.obs_dim + int(self.agent.time_feature), env.action_dim
-        )
+        self.buffer = self._new_buffer()
         self.step = 0
         self.episode = 0
         self.random_states: list[np.ndarray] = []
@@ -212,7 +212,8 @@ class Trainer:
     def _episode(self) -> dict[str, Any]:
         """Collect, reward, store and learn from one episode; evaluate when due."""
         cfg = self.config
-        random_phase = self.step < cfg.start_steps
+        # An on-policy agent collects with its own policy from the start (SIL's code).
+        random_phase = self.step < cfg.start_steps and not self.agent.on_policy
         if not random_phase and not bool(self.state.normalizer_set):
             self._fit_normalizer()
         self.hooks.episode_started(self)
@@ -254,7 +255,12 @@ class Trainer:
             "train_task_return": round(float(np.sum(task_rewards)), 4),
             "_steps": num_steps,
         }
-        if not random_phase:
+        if self.agent.on_policy:
+            if self.buffer.size >= self.agent.functions.batch_steps:
+                with self.hooks.timed("update"):
+                    metrics = self._learn_on_policy()
+                row.update({name: round(value, 5) for name, value in metrics.items()})
+        elif not random_phase:
             with self.hooks.timed("update"):
                 self.state, metrics = self._update(num_steps * cfg.updates_per_step)
             row.update({name: round(value, 5) for name, value in metrics.items()})
@@ -295,7 +301,8 @@ class Trainer:
                 with timed("act"):
                     action = np.asarray(funcs.act(policy, agent_obs, step_keys[t]), np.float64)
             with timed("env"):
-                obs, reward, terminated, truncated, info = self.env.step(action)
+                to_env = env_action(action, self.max_action)
+                obs, reward, terminated, truncated, info = self.env.step(to_env)
             observations.append(obs)
             actions.append(action)
             task_rewards.append(float(reward))
@@ -350,9 +357,49 @@ class Trainer:
             chunk >>= 1
         return state, {name: totals[name] / weights[name] for name in totals}
 
+    def _learn_on_policy(self) -> dict[str, float]:
+        """One iteration of the on-policy agent on the episodes collected since the last (all
+        of the buffer's), then the batch-learning reward's step on the same episodes (SIL's
+        critic), and an empty buffer for the next batch. The agent's value loss is logged
+        as ``critic_loss``, its other metrics (TensorBoard only) prefixed with
+        ``agent_``."""
+        size = self.buffer.size
+        data = jax.tree.map(lambda x: np.asarray(x[:size]), self.buffer.data)
+        episode_end = np.zeros(size, bool)
+        for start, length in self.buffer.episodes.values():
+            episode_end[start + length - 1] = True
+        batch = OnPolicyBatch(data.obs, data.action, data.reward, episode_end)
+        self.state, learned = self.agent.functions.learn(self.state, batch)
+        metrics = {
+            "critic_loss" if k == "value_loss" else f"agent_{k}": float(v)
+            for k, v in learned.items()
+        }
+        end_batch = getattr(self.rewarder, "end_batch", None)
+        if end_batch is not None:
+            metrics.update({k: float(v) for k, v in end_batch().items()})
+        self.buffer = self._new_buffer()
+        return metrics
+
+    def _new_buffer(self) -> ReplayBuffer:
+        """An empty buffer: the replay buffer of ``replay_capacity`` transitions, or for an
+        on-policy agent its batch under collection (at most a batch and an episode)."""
+        funcs, obs_dim = self.agent.functions, self.obs_dim + int(self.agent.time_feature)
+        if self.agent.on_policy:
+            capacity = funcs.batch_steps + self.horizon
+        else:
+            capacity = self.config.replay_capacity
+        return ReplayBuffer(capacity, obs_dim, self.action_dim)
+
     def _fit_normalizer(self) -> None:
         """Fix the networks' normaliser once, when the policy takes over: see
-        ``build.network_normalizer``."""
+        ``build.network_normalizer``. An on-policy agent has no random phase: its normaliser
+        is the demos' states' (mean, std floored as there)."""
+        if self.agent.on_policy and not self.random_states and self.demos:
+            mean, std = network_normalizer(np.concatenate([d[:-1] for d in self.demos]), [])
+            if self.agent.time_feature:
+                mean, std = np.append(mean, 0.0), np.append(std, 1.0)
+            self.state = self.agent.functions.set_normalizer(self.state, mean, std)
+            return
         random_states = (
             np.concatenate(self.random_states)
             if self.random_states

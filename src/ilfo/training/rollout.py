@@ -36,6 +36,13 @@ def agent_observations(observations: np.ndarray, horizon: int, time_feature: boo
     return np.concatenate([observations, remaining[:, None]], axis=1)
 
 
+def env_action(action: np.ndarray, max_action: float) -> np.ndarray:
+    """What the environment is sent for ``action``: float64, clipped to [-max_action,
+    max_action]. Off-policy agents act within the box already (unchanged); TRPO's Gaussian
+    actions are unbounded, as in SIL's code, and are learned from as drawn."""
+    return np.clip(np.asarray(action, np.float64), -max_action, max_action)
+
+
 def policy_actions(agent: Agent, policy: Any, observations: np.ndarray, horizon: int) -> np.ndarray:
     """The deterministic actions (T, a) a policy takes along an episode's observations
     (T + 1, d) (its last observation has no action)."""
@@ -79,7 +86,9 @@ def rollout_policy(
             action = np.asarray(agent.functions.act(policy, agent_obs))
         else:
             action = np.asarray(agent.functions.act(policy, agent_obs, step_keys[t]))
-        obs, reward, terminated, truncated, info = env.step(action.astype(np.float64))
+        obs, reward, terminated, truncated, info = env.step(
+            env_action(action, agent.functions.max_action)
+        )
         actions.append(action)
         if render:
             frames.append(env.render())

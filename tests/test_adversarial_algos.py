@@ -1,0 +1,94 @@
+"""SIL-(s,s') (TRPO, on-policy) and OOPS_adv (TD3) end to end through the training loop."""
+
+import json
+
+import numpy as np
+import pytest
+
+from ilfo.cli import main
+from ilfo.training import TrainConfig, Trainer
+from test_train import TINY, _metrics, _train
+
+SIL_TINY = dict(
+    algo="sil",
+    trpo={"hidden": (16, 16), "batch_steps": 200, "value_iters": 5},
+    sil={"critic_hidden": (16, 16), "critic_features": 8, "expert_subsample": 5},
+)
+OOPS_ADV_TINY = dict(
+    algo="oops-adv-td3",
+    oops_adv={"critic_hidden": (16, 16), "critic_features": 8},
+    td3={"actor_hidden": (32, 32), "critic_hidden": (32, 32)},
+)
+
+
+def test_sil_learns_once_per_batch_deterministically_and_resumes_mid_batch(tmp_path):
+    full = _metrics(_train(tmp_path, "full", **SIL_TINY))
+    assert full == _metrics(_train(tmp_path, "again", **SIL_TINY))
+    # No random phase: TRPO acts from the first step; 100-step episodes, a batch of 200 steps:
+    # the agent and the critic learn after every second episode, and only then.
+    learned = [int(r["step"]) for r in full if r["critic_loss"]]
+    assert learned == [200, 400, 600]
+    assert [int(r["step"]) for r in full if r["reward_loss"]] == learned
+    assert all(float(r["proxy_return"]) != 0 for r in full)
+    # Stopped after 300 steps: half a batch pending (in the buffer and in the critic's state).
+    run = _train(tmp_path, "resumed", **{**SIL_TINY, "steps": 300})
+    trainer = Trainer.resume(run, progress=False, steps=600)
+    assert trainer.step == 300
+    assert _metrics(trainer.train()) == full
+
+
+def test_oops_adv_trains_deterministically_and_resume_equals_uninterrupted(tmp_path):
+    full = _metrics(_train(tmp_path, "full", **OOPS_ADV_TINY))
+    assert full == _metrics(_train(tmp_path, "again", **OOPS_ADV_TINY))
+    assert all(float(r["proxy_return"]) < 0 for r in full)  # minus a transported cost
+    run = _train(tmp_path, "resumed", **{**OOPS_ADV_TINY, "steps": 300})
+    trainer = Trainer.resume(run, progress=False, steps=600)
+    assert _metrics(trainer.train()) == full
+
+
+def test_oops_adv_reward_differs_from_oops_with_a_fixed_cosine_cost(tmp_path):
+    adv = _metrics(_train(tmp_path, "adv", **{**OOPS_ADV_TINY, "steps": 200}))
+    cos = _metrics(
+        _train(
+            tmp_path,
+            "cos",
+            algo="oops-td3",
+            oops={"metric": "cosine"},
+            steps=200,
+            td3=OOPS_ADV_TINY["td3"],
+        )
+    )
+    assert [r["proxy_return"] for r in adv] != [r["proxy_return"] for r in cos]
+
+
+def test_sil_flags_reach_config_json_and_the_policy_reads_back(tmp_path):
+    args = ["train", "--algo", "sil", "--env", "Hopper-v5", "--demos", TINY["demos"]]
+    args += ["--horizon", "50", "--steps", "100", "--eval-every", "100", "--eval-episodes", "1"]
+    args += ["--out", str(tmp_path), "--no-progress", "--trpo-batch-steps", "100"]
+    args += ["--trpo-hidden", "16", "16", "--sil-critic-lr", "0.001", "--sil-expert-subsample", "4"]
+    assert main(args) == 0
+    (run,) = tmp_path.iterdir()
+    config = json.loads((run / "config.json").read_text())
+    assert config["trpo"]["batch_steps"] == 100 and config["trpo"]["hidden"] == [16, 16]
+    assert config["sil"]["critic_lr"] == 0.001 and config["sil"]["expert_subsample"] == 4
+    assert config["sil"]["seed"] == config["seed"]
+    assert config["td3"] is None and config["oops"] is None
+    assert main(["eval", str(run), "--episodes", "1", "--json"]) == 0
+
+
+def test_trpo_and_sil_settings_do_not_apply_to_other_algos():
+    with pytest.raises(ValueError, match="trpo settings"):
+        TrainConfig(algo="oops-td3", trpo={"max_kl": 0.01})
+    with pytest.raises(ValueError, match="sil settings"):
+        TrainConfig(algo="oops-adv-td3", sil={"reg": 0.1})
+    with pytest.raises(ValueError, match="oops_adv settings"):
+        TrainConfig(algo="sil", oops_adv={"reg": 0.1})
+
+
+def test_unbounded_actions_are_clipped_for_the_environment_but_learned_as_drawn():
+    from ilfo.training.rollout import env_action
+
+    np.testing.assert_array_equal(env_action(np.array([-3.0, 0.5, 2.0]), 1.0), [-1.0, 0.5, 1.0])
+    inside = np.array([0.25, -0.75], np.float32)
+    assert env_action(inside, 1.0).dtype == np.float64
+    np.testing.assert_array_equal(env_action(inside, 1.0), inside.astype(np.float64))
