@@ -37,6 +37,29 @@ def test_sil_learns_once_per_batch_deterministically_and_resumes_mid_batch(tmp_p
     assert _metrics(trainer.train()) == full
 
 
+def test_an_on_policy_policy_is_evaluated_again_only_after_it_learns(tmp_path):
+    from ilfo.training import LoopHooks
+
+    class CountEvaluations(LoopHooks):
+        evaluations = 0
+
+        def timed(self, piece):
+            if piece == "evaluate":
+                self.evaluations += 1
+            return super().timed(piece)
+
+    hooks = CountEvaluations()
+    config = TrainConfig(**{**TINY, **SIL_TINY, "steps": 600, "eval_every": 100})
+    run = Trainer(config, tmp_path / "run", progress=False, hooks=hooks).train()
+    rows = _metrics(run)
+    assert all(r["eval_score"] for r in rows)  # every episode's row has its evaluation
+    # Learns at 200, 400 and 600: evaluated at 100 (the first), 200, 400 and 600 only; the
+    # rows between repeat the last evaluation of the same policy.
+    assert hooks.evaluations == 4
+    by_step = {int(r["step"]): r["eval_score"] for r in rows}
+    assert by_step[300] == by_step[200] and by_step[500] == by_step[400]
+
+
 def test_oops_adv_trains_deterministically_and_resume_equals_uninterrupted(tmp_path):
     full = _metrics(_train(tmp_path, "full", **OOPS_ADV_TINY))
     assert full == _metrics(_train(tmp_path, "again", **OOPS_ADV_TINY))

@@ -218,7 +218,8 @@ AGENT_PARTS: dict[str, AgentPart] = {
         default=lambda preset: TRPOConfig(),
         for_run=lambda config, horizon, fixed_horizon: config,
         title="TRPO agent (on-policy)",
-        description="Defaults: the SIL authors' TRPO (Khrylx/PyTorch-RL as SIL ran it). It "
+        description="Defaults: the SIL authors' TRPO (Khrylx/PyTorch-RL as SIL ran it, its "
+        "Fisher-vector product included), and a KL check in the line search (ilfo's). It "
         "learns from batches of its own episodes: --start-steps, --updates-per-step and "
         "--replay-capacity do not apply.",
     ),

@@ -33,6 +33,8 @@ Where ilfo departs from the SIL authors' TRPO:
 - ``kl_check`` (default True): the line search also rejects a step whose mean KL(old || new)
   exceeds ``max_kl``, so every accepted step keeps to the trust region. The SIL code checks only
   the improvement ratio (``kl_check=False`` is the code's).
+- ``code_fisher`` (default True) is not a departure but a quirk kept: the code's Fisher-vector
+  product adds 2 v to every parameter, not only to the log std (``TRPOConfig.code_fisher``).
 - float32 networks and JAX computations (the SIL code runs in float64); the L-BFGS-B of the
   value fit works in float64 on the host, on float32 losses and gradients.
 - Degenerate batches are guarded where the code would produce NaN: advantages with zero spread
@@ -105,6 +107,13 @@ class TRPOConfig:
     accept_ratio: float = 0.1
     """A line-search step is accepted when its actual surrogate improvement exceeds this
     fraction of the expected (linear) one."""
+    code_fisher: bool = True
+    """The authors' Fisher-vector product: the KL's Hessian plus 2 v on the mean network's
+    parameters too (Khrylx's code adds 2 v to a slice meant for the log std, but the slice
+    starts at 0, the log std being the module's first parameter, and spans N x action_dim
+    entries: every parameter). Its steps are several times shorter than the exact Hessian's
+    (the mean network's Fisher has mostly tiny eigenvalues). False: the exact Hessian of the
+    mean KL (2 v on the log std only)."""
     kl_check: bool = True
     """Also reject a line-search step whose mean KL(old || new) exceeds max_kl, so that every
     accepted step keeps to the trust region. SIL's code has no such check (False = the code's);
@@ -263,12 +272,18 @@ def gaussian_kl(
 
 
 def fisher_vector_product(
-    policy: GaussianMLPPolicy, params: Params, obs_n: jax.Array, damping: float
+    policy: GaussianMLPPolicy,
+    params: Params,
+    obs_n: jax.Array,
+    damping: float,
+    code_fisher: bool = False,
 ) -> Callable[[Params], Params]:
     """v -> (F + damping I) v, F the Hessian at ``params`` of the mean over ``obs_n`` (N,
     obs_dim; normalised) of KL(pi_params || pi). For this Gaussian policy F is the analytic
     Fisher: (1/N) J^T diag(1/std^2) J on the mean network's parameters, 2 I on the log std and
-    0 across (Khrylx's ``use_fim``). ``v`` is a pytree like ``params``."""
+    0 across (Khrylx's ``use_fim``). ``code_fisher``: also 2 I on the mean network's parameters,
+    as the authors' code computes it (``TRPOConfig.code_fisher``). ``v`` is a pytree like
+    ``params``."""
     mean_old, log_std_old = jax.lax.stop_gradient(policy.apply(params, obs_n))
 
     def mean_kl(p: Params) -> jax.Array:
@@ -277,7 +292,17 @@ def fisher_vector_product(
 
     # linearize: the forward pass of grad(KL) is done once, and each product is its JVP.
     _, hvp = jax.linearize(jax.grad(mean_kl), params)
-    return lambda v: jax.tree.map(lambda fv, x: fv + damping * x, hvp(v), v)
+
+    def product(v: Params) -> Params:
+        out = jax.tree.map(lambda fv, x: fv + damping * x, hvp(v), v)
+        if code_fisher:
+            mean = jax.tree.map(
+                lambda fv, x: fv + 2.0 * x, out["params"]["mean"], v["params"]["mean"]
+            )
+            out = {"params": {**out["params"], "mean": mean}}
+        return out
+
+    return product
 
 
 def conjugate_gradients(
@@ -466,7 +491,7 @@ def make_trpo(
             return jnp.mean(-adv * ratio)
 
         grad = jax.grad(surrogate)(flat0)
-        fvp = fisher_vector_product(policy, actor_params, obs_n, cfg.damping)
+        fvp = fisher_vector_product(policy, actor_params, obs_n, cfg.damping, cfg.code_fisher)
 
         def fvp_flat(v: jax.Array) -> jax.Array:
             return ravel_pytree(fvp(actor_from_flat(v)))[0]

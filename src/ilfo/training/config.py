@@ -103,7 +103,8 @@ class TrainConfig:
     firl: FIRLConfig | None = None
     """f-IRL's reward (algo firl-fkl); None: the authors' settings for the env."""
     trpo: TRPOConfig | None = None
-    """TRPO agent (algo sil), on-policy; None: the SIL authors' settings (``TRPOConfig()``)."""
+    """TRPO agent (algo sil), on-policy; None: the SIL authors' settings with a KL check in the
+    line search (``TRPOConfig()``)."""
     sil: SILConfig | None = None
     """SIL-(s,s')'s reward (algo sil); None: the authors' settings (``SILConfig()``)."""
     oops_adv: AdversarialOOPSConfig | None = None

@@ -124,6 +124,10 @@ class Trainer:
         self._lock = RunLock(self.run_dir)  # held while this trainer writes the run directory
         self._resumed = False  # set by ``resume``: the run directory holds this run already
         self._metrics: MetricsLog | None = None  # opened by ``train``
+        # Whether the policy may differ from the one last evaluated: always, for an off-policy
+        # agent; for an on-policy one, after each ``learn`` (and after a resume: recomputing
+        # the last evaluation gives the same numbers).
+        self._policy_changed = True
 
     def checkpoint_plan(self) -> str:
         """Where and when this run checkpoints, in words (the CLI prints it at the start)."""
@@ -274,8 +278,12 @@ class Trainer:
                 # Reading the metrics waits for the jitted learning: timed as "reward".
                 row.update({k: round(float(v), 5) for k, v in metrics.items() if k in _LOGGED})
         if self.step // cfg.eval_every > (self.step - num_steps) // cfg.eval_every:
-            with self.hooks.timed("evaluate"):
-                self.last_eval = self.evaluate()
+            # An on-policy agent's policy changes only when it learns, and evaluation is
+            # deterministic (fixed seeds): between two learns it would score the same again.
+            if self._policy_changed or not self.last_eval:
+                with self.hooks.timed("evaluate"):
+                    self.last_eval = self.evaluate()
+                self._policy_changed = not self.agent.on_policy
             row.update(self.last_eval)
             self._keep_best()
         return row
@@ -370,6 +378,7 @@ class Trainer:
             episode_end[start + length - 1] = True
         batch = OnPolicyBatch(data.obs, data.action, data.reward, episode_end)
         self.state, learned = self.agent.functions.learn(self.state, batch)
+        self._policy_changed = True
         metrics = {
             "critic_loss" if k == "value_loss" else f"agent_{k}": float(v)
             for k, v in learned.items()
