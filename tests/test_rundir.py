@@ -386,3 +386,59 @@ def test_sinkhorn_refuses_costs_beyond_float64_instead_of_returning_nan():
         sinkhorn(cost + 1e20)  # a huge offset: the same plan in exact arithmetic, not in float64
     large = sinkhorn(cost * 1e3, max_iter=50)  # large but resolvable: a result, maybe unconverged
     assert np.isfinite(large.plan).all() and np.isfinite(large.cost)
+
+
+def test_a_snapshot_leaves_the_buffer_out_and_resumes_after_refilling_it(tmp_path, capsys):
+    run = _train(tmp_path, "run", steps=400)  # checkpoints at 200 and 400
+    out = tmp_path / "carried"
+    assert main(["snapshot", str(run), str(out)]) == 0
+    assert "MiB" in capsys.readouterr().out
+    (ckpt,) = (out / "checkpoints").iterdir()
+    assert ckpt.name == "step_000000400"
+    assert not (ckpt / "replay.npz").exists() and (ckpt / "replay.omitted").is_file()
+    assert not (out / "tb").exists() and (out / "metrics.csv").is_file()
+    size = sum(f.stat().st_size for f in out.rglob("*") if f.is_file())
+    run_size = sum(f.stat().st_size for f in run.rglob("*") if f.is_file())
+    assert size < run_size - (run / "checkpoints" / ckpt.name / "replay.npz").stat().st_size
+    assert main(["snapshot", str(run), str(out)]) != 0  # never over an existing directory
+    assert "exists" in capsys.readouterr().err
+    with pytest.warns(UserWarning, match="refilled by 200 steps"):
+        trainer = Trainer.resume(out, progress=False, steps=800)
+    assert trainer.step == 400 and trainer.buffer.size == 0
+    rows = _metrics(trainer.train())
+    by_step = {int(r["step"]): r for r in rows}
+    # Steps 400-600 refill the buffer with the policy's own episodes (no updates), then
+    # updates resume; every step is logged once.
+    assert [int(r["step"]) for r in rows] == list(range(100, 900, 100))
+    assert not by_step[500]["critic_loss"] and not by_step[600]["critic_loss"]
+    assert by_step[700]["critic_loss"] and by_step[800]["critic_loss"]
+    # A snapshot of the continued run carries the refill's end with it.
+    again = Trainer.resume(out, progress=False)
+    assert again.step == 800 and again.refill_until == 600
+    again._lock.release()
+
+
+def test_a_snapshot_taken_mid_refill_keeps_refilling(tmp_path):
+    run = _train(tmp_path, "run", steps=400)
+    out = tmp_path / "carried"
+    from ilfo.training.run_dir import snapshot_run
+
+    snapshot_run(run, out)
+    with pytest.warns(UserWarning, match="refilled"):
+        trainer = Trainer.resume(out, progress=False, steps=500)
+    trainer.train()  # stops at 500, inside the refill (it lasts to 600)
+    resumed = Trainer.resume(out, progress=False, steps=700)
+    assert resumed.step == 500 and resumed.refill_until == 600
+    rows = {int(r["step"]): r for r in _metrics(resumed.train())}
+    assert not rows[600]["critic_loss"] and rows[700]["critic_loss"]
+
+
+def test_an_on_policy_run_cannot_continue_from_a_snapshot(tmp_path):
+    from ilfo.training.run_dir import snapshot_run
+
+    sil = dict(algo="sil", trpo={"hidden": (16, 16), "batch_steps": 200, "value_iters": 5},
+               sil={"critic_hidden": (16, 16), "critic_features": 8})  # fmt: skip
+    run = _train(tmp_path, "run", steps=200, **sil)
+    out = snapshot_run(run, tmp_path / "carried")
+    with pytest.raises(ValueError, match="on-policy run"):
+        Trainer.resume(out, progress=False)

@@ -14,7 +14,12 @@ from ilfo.cli._common import _command as _command  # re-exported: ilfo.cli._comm
 from ilfo.cli.data import _add_demos_parser, _add_label_parser, _add_reward_parser
 from ilfo.cli.experiments import _add_report_parser, _add_reproduce_parser, _add_sweep_parser
 from ilfo.cli.experts import _add_expert_parser
-from ilfo.cli.train import _add_eval_parser, _add_plot_parser, _add_train_parser
+from ilfo.cli.train import (
+    _add_eval_parser,
+    _add_plot_parser,
+    _add_snapshot_parser,
+    _add_train_parser,
+)
 from ilfo.compilation_cache import enable_compilation_cache
 
 __all__ = ["main"]
@@ -33,6 +38,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     _add_train_parser(sub)
     _add_eval_parser(sub)
     _add_plot_parser(sub)
+    _add_snapshot_parser(sub)
     _add_expert_parser(sub)
     _add_reward_parser(sub)
     _add_demos_parser(sub)

@@ -211,3 +211,29 @@ def _run_plot(args: argparse.Namespace) -> int:
     out = plot_runs(dirs, Path(args.out), args.metric)
     print(f"wrote {out}")
     return 0
+
+
+def _add_snapshot_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "snapshot",
+        help="Copy a run without its replay buffer (a few MB: to keep in git or move it).",
+        description=(
+            "Copy RUN_DIR's config, metrics, policies and newest checkpoint, without the "
+            "replay buffer, to OUT. `ilfo train --resume OUT` continues it: the buffer is "
+            "first refilled by --start-steps steps of the current policy (no updates), so the "
+            "continuation is close to, not exactly, the uninterrupted run's. For runs and "
+            "experts that outlive a machine (off-policy agents only)."
+        ),
+    )
+    p.add_argument("run_dir", help="the run directory")
+    p.add_argument("out", help="the snapshot's directory (must not exist)")
+    p.set_defaults(run=_run_snapshot)
+
+
+def _run_snapshot(args: argparse.Namespace) -> int:
+    from ilfo.training.run_dir import snapshot_run
+
+    out = snapshot_run(args.run_dir, args.out)
+    size = sum(f.stat().st_size for f in out.rglob("*") if f.is_file())
+    print(f"wrote {out} ({size / 2**20:.1f} MiB); continue it with `ilfo train --resume {out}`")
+    return 0

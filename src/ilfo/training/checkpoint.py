@@ -27,6 +27,8 @@ from ilfo.replay import ReplayBuffer
 from ilfo.rewards import RewardState
 from ilfo.training.run_dir import (
     CHECKPOINTS_DIR,
+    REPLAY_FILE,
+    REPLAY_OMITTED,
     checkpoint_steps,
     fault_point,
     latest_checkpoint,
@@ -55,6 +57,11 @@ class Checkpoint:
     """States of the random phase, until the normaliser is fitted from them."""
     reward_state: RewardState | None = None
     """The episode reward's ``state()``; None for the task reward."""
+    refill_until: int = 0
+    """Updates wait until this step: a run continued from a snapshot (no replay buffer) first
+    refills its buffer with the policy's own steps."""
+    buffer_omitted: bool = False
+    """The checkpoint is a snapshot's: its replay buffer was left out (``run_dir.snapshot_run``)."""
 
 
 def save_checkpoint(run_dir: Path, ckpt: Checkpoint) -> Path:
@@ -68,7 +75,7 @@ def save_checkpoint(run_dir: Path, ckpt: Checkpoint) -> Path:
     tmp.mkdir(parents=True)
     (tmp / "agent.msgpack").write_bytes(flax.serialization.to_bytes(ckpt.agent_state))
     assert ckpt.buffer is not None, "a checkpoint needs the replay buffer"
-    ckpt.buffer.save(tmp / "replay.npz")
+    ckpt.buffer.save(tmp / REPLAY_FILE)
     if ckpt.random_states:
         np.savez(tmp / "random_states.npz", *ckpt.random_states)
     reward = ckpt.reward_state
@@ -82,6 +89,7 @@ def save_checkpoint(run_dir: Path, ckpt: Checkpoint) -> Path:
         "last_eval": ckpt.last_eval,
         "best_eval": ckpt.best_eval,
         "reward_state": None if reward is None else reward.values,
+        "refill_until": ckpt.refill_until,
     }
     (tmp / "state.json").write_text(json.dumps(meta))  # last: see run_dir.CHECKPOINT_FILES
     fault_point("checkpoint_before_rename")
@@ -105,6 +113,7 @@ def load_checkpoint(
         if meta.get("schema") != CHECKPOINT_SCHEMA:
             raise ValueError(f"checkpoint schema {meta.get('schema')}, expected 1")
         counters = int(meta["step"]), int(meta["episode"]), float(meta["elapsed"])
+        refill_until = int(meta.get("refill_until", 0))
         evals = dict(meta["last_eval"]), dict(meta.get("best_eval", {}))
         if "reward_state" in meta:
             values = meta["reward_state"]
@@ -114,11 +123,12 @@ def load_checkpoint(
         raise ValueError(f"{state_path} is not a readable checkpoint state ({err})") from None
     agent_state = load_msgpack(agent_template, ckpt / "agent.msgpack", "agent checkpoint")
     buffer = None
-    if buffer_dims is not None:
-        buffer = ReplayBuffer.load(ckpt / "replay.npz")
+    omitted = not (ckpt / REPLAY_FILE).is_file() and (ckpt / REPLAY_OMITTED).is_file()
+    if buffer_dims is not None and not omitted:
+        buffer = ReplayBuffer.load(ckpt / REPLAY_FILE)
         if (buffer.obs_dim, buffer.action_dim) != buffer_dims:
             raise ValueError(
-                f"{ckpt / 'replay.npz'}: transitions of (obs, action) dims "
+                f"{ckpt / REPLAY_FILE}: transitions of (obs, action) dims "
                 f"{(buffer.obs_dim, buffer.action_dim)}, this run's config makes {buffer_dims}"
             )
     arrays_path = next(
@@ -137,4 +147,6 @@ def load_checkpoint(
         buffer,
         random_states,
         reward_state,  # type: ignore[arg-type]
+        refill_until,
+        omitted,
     )

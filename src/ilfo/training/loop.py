@@ -128,6 +128,8 @@ class Trainer:
         # agent; for an on-policy one, after each ``learn`` (and after a resume: recomputing
         # the last evaluation gives the same numbers).
         self._policy_changed = True
+        self.refill_until = 0
+        """Updates wait until this step (a run continued from a snapshot refills its buffer)."""
 
     def checkpoint_plan(self) -> str:
         """Where and when this run checkpoints, in words (the CLI prints it at the start)."""
@@ -218,6 +220,7 @@ class Trainer:
         cfg = self.config
         # An on-policy agent collects with its own policy from the start (SIL's code).
         random_phase = self.step < cfg.start_steps and not self.agent.on_policy
+        refilling = self.step < self.refill_until
         if not random_phase and not bool(self.state.normalizer_set):
             self._fit_normalizer()
         self.hooks.episode_started(self)
@@ -264,7 +267,7 @@ class Trainer:
                 with self.hooks.timed("update"):
                     metrics = self._learn_on_policy()
                 row.update({name: round(value, 5) for name, value in metrics.items()})
-        elif not random_phase:
+        elif not random_phase and not refilling:
             with self.hooks.timed("update"):
                 self.state, metrics = self._update(num_steps * cfg.updates_per_step)
             row.update({name: round(value, 5) for name, value in metrics.items()})
@@ -379,6 +382,8 @@ class Trainer:
         batch = OnPolicyBatch(data.obs, data.action, data.reward, episode_end)
         self.state, learned = self.agent.functions.learn(self.state, batch)
         self._policy_changed = True
+        self.refill_until = 0
+        """Updates wait until this step (a run continued from a snapshot refills its buffer)."""
         metrics = {
             "critic_loss" if k == "value_loss" else f"agent_{k}": float(v)
             for k, v in learned.items()
@@ -465,6 +470,7 @@ class Trainer:
             buffer=self.buffer,
             random_states=self.random_states,
             reward_state=reward_state,
+            refill_until=self.refill_until,
         )
         return save_checkpoint(self.run_dir, ckpt)
 
@@ -523,8 +529,24 @@ class Trainer:
         a run without continuing it, see ``run_dir.load_run_policy``."""
         dims = (self.buffer.obs_dim, self.buffer.action_dim)
         ckpt = load_checkpoint(path, self.state, dims)
-        assert ckpt.buffer is not None
-        self.state, self.buffer = ckpt.agent_state, ckpt.buffer
+        self.refill_until = ckpt.refill_until
+        if ckpt.buffer is None:  # a snapshot's checkpoint (run_dir.snapshot_run)
+            if self.agent.on_policy:
+                raise ValueError(
+                    f"{path} has no replay buffer (a snapshot): an on-policy run keeps its "
+                    "pending batch there and cannot continue without it; continue the full run "
+                    "directory instead"
+                )
+            self.refill_until = ckpt.step + self.config.start_steps
+            warnings.warn(
+                f"{path} has no replay buffer (a snapshot of the run): the buffer is refilled "
+                f"by {self.config.start_steps:,} steps of the current policy before updates "
+                "resume; the run continues, but not exactly as the uninterrupted one would",
+                stacklevel=3,
+            )
+        else:
+            self.buffer = ckpt.buffer
+        self.state = ckpt.agent_state
         self.step, self.episode, self.elapsed = ckpt.step, ckpt.episode, ckpt.elapsed
         self.last_eval, self.best_eval = ckpt.last_eval, ckpt.best_eval
         self.random_states = ckpt.random_states

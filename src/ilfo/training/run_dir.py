@@ -39,8 +39,12 @@ if TYPE_CHECKING:  # at run time these are imported where used: they import this
 CONFIG_FILE = "config.json"
 CHECKPOINTS_DIR = "checkpoints"
 LOCK_FILE = ".lock"
-CHECKPOINT_FILES = ("state.json", "agent.msgpack", "replay.npz")
-"""Files every checkpoint has (``state.json`` is written last)."""
+CHECKPOINT_FILES = ("state.json", "agent.msgpack")
+"""Files every checkpoint has (``state.json`` is written last), beside its replay buffer
+(``REPLAY_FILE``, or ``REPLAY_OMITTED`` in a snapshot's checkpoint)."""
+REPLAY_FILE = "replay.npz"
+REPLAY_OMITTED = "replay.omitted"
+"""Written in place of the replay buffer by ``snapshot_run`` (JSON: what was left out)."""
 FAULT_ENV = "ILFO_FAULT_KILL_AT"
 """Test hook: ``NAME[:K]`` kills the process with SIGKILL at the K-th (default first) time it
 reaches the fault point NAME (see ``fault_point``)."""
@@ -124,7 +128,8 @@ def checkpoint_steps(run_dir: str | Path) -> list[tuple[int, Path]]:
     found = []
     for path in root.iterdir():
         match = _STEP_DIR.fullmatch(path.name)
-        if match and all((path / name).is_file() for name in CHECKPOINT_FILES):
+        has_replay = (path / REPLAY_FILE).is_file() or (path / REPLAY_OMITTED).is_file()
+        if match and has_replay and all((path / name).is_file() for name in CHECKPOINT_FILES):
             found.append((int(match.group(1)), path))
     return sorted(found)
 
@@ -250,3 +255,48 @@ def _probe_env(config: TrainConfig) -> Any:
         horizon=config.horizon,
         healthy_angle_range=config.healthy_angle_range,
     )
+
+
+SNAPSHOT_FILES = (
+    CONFIG_FILE,
+    "metrics.csv",
+    FINAL_POLICY_FILE,
+    BEST_POLICY_FILE,
+    BEST_POLICY_INFO,
+    "learning_curve.png",
+)
+"""What ``snapshot_run`` copies besides the newest checkpoint (each where it exists)."""
+
+
+def snapshot_run(run_dir: str | Path, out: str | Path) -> Path:
+    """A copy of a run small enough to keep in git or move between machines: its config,
+    metrics, policies and newest complete checkpoint without the replay buffer (the agent's and
+    the reward's state, a few MB; ``REPLAY_OMITTED`` in place of ``replay.npz``). TensorBoard
+    events are left out (``metrics.csv`` has every row). ``Trainer.resume`` continues it: the
+    buffer is refilled by ``start_steps`` steps of the current policy before updates resume, so
+    the continuation is not the exact one the full run directory gives.
+
+    Raises FileNotFoundError where ``run_dir`` has no complete checkpoint, FileExistsError
+    where ``out`` exists, and ValueError where another process is writing the run."""
+    run_dir, out = Path(run_dir), Path(out)
+    read_run_config(run_dir)  # a run directory, or a clear error
+    with RunLock(run_dir):  # not while a trainer writes it: a checkpoint could be half-replaced
+        checkpoint = latest_checkpoint(run_dir)
+        if checkpoint is None:
+            raise FileNotFoundError(f"{run_dir} has no complete checkpoint to snapshot yet")
+        if out.exists():
+            raise FileExistsError(f"{out} exists: choose a new directory for the snapshot")
+        tmp = out.with_name(f".{out.name}.tmp")
+        shutil.rmtree(tmp, ignore_errors=True)
+        (tmp / CHECKPOINTS_DIR).mkdir(parents=True)
+        for name in SNAPSHOT_FILES:
+            if (run_dir / name).is_file():
+                shutil.copy2(run_dir / name, tmp / name)
+        target = tmp / CHECKPOINTS_DIR / checkpoint.name
+        shutil.copytree(checkpoint, target, ignore=shutil.ignore_patterns(REPLAY_FILE))
+        omitted = {"left_out": REPLAY_FILE, "from": str(run_dir.resolve() / CHECKPOINTS_DIR)}
+        if (checkpoint / REPLAY_FILE).is_file():
+            omitted["bytes"] = (checkpoint / REPLAY_FILE).stat().st_size
+        (target / REPLAY_OMITTED).write_text(json.dumps(omitted))
+        tmp.rename(out)
+    return out
