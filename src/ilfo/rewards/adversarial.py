@@ -252,3 +252,18 @@ def _pad(x: np.ndarray, axes: int = 1) -> np.ndarray:
     out = np.zeros(shape, x.dtype)
     out[tuple(slice(0, n) for n in x.shape)] = x
     return out
+
+
+def pending_atoms(arrays: dict[str, np.ndarray], k: int, atom_dim: int) -> np.ndarray:
+    """The learner atoms (T, atom_dim) of pending episode ``k`` in a reward state's arrays
+    (``pending/<k>``, as SIL's and OOPS_adv's ``state()`` write them), checked; a ValueError
+    names what is wrong."""
+    atoms = arrays.get(f"pending/{k}")
+    if atoms is None:
+        raise ValueError(f"reward state lists pending episode {k} but has no pending/{k} array")
+    atoms = np.asarray(atoms, dtype=np.float64)
+    if atoms.ndim != 2 or atoms.shape[1] != atom_dim:
+        raise ValueError(
+            f"pending episode {k} has atoms of shape {atoms.shape}, expected (T, {atom_dim})"
+        )
+    return atoms

@@ -26,7 +26,12 @@ import jax
 import numpy as np
 
 from ilfo.ot import OTResult, sinkhorn
-from ilfo.rewards.adversarial import AdversarialCritic, critic_arrays, load_critic_arrays
+from ilfo.rewards.adversarial import (
+    AdversarialCritic,
+    critic_arrays,
+    load_critic_arrays,
+    pending_atoms,
+)
 from ilfo.rewards.base import (
     RewardOutput,
     RewardState,
@@ -169,17 +174,9 @@ class AdversarialOOPS:
         self, k: int, demo: Any, arrays: dict[str, np.ndarray], params: Any
     ) -> _Pending:
         demo = int(demo)
-        atoms = arrays.get(f"pending/{k}")
-        if atoms is None:
-            raise ValueError(f"reward state lists pending episode {k} but has no pending/{k} array")
-        atoms = np.asarray(atoms, dtype=np.float64)
+        atoms = pending_atoms(arrays, k, 2 * self.obs_dim)
         if not 0 <= demo < len(self.expert_atoms):
             raise ValueError(f"pending episode {k}: demo {demo} out of {len(self.expert_atoms)}")
-        if atoms.ndim != 2 or atoms.shape[1] != 2 * self.obs_dim:
-            raise ValueError(
-                f"pending episode {k} has atoms of shape {atoms.shape}, expected (T, "
-                f"{2 * self.obs_dim})"
-            )
         return _Pending(atoms, demo, self._solve(atoms, demo, params).plan)
 
     def _solve(self, atoms: np.ndarray, demo: int, params: Any = None) -> OTResult:

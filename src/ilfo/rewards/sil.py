@@ -38,7 +38,12 @@ import jax
 import numpy as np
 
 from ilfo.ot import OTResult, sinkhorn
-from ilfo.rewards.adversarial import AdversarialCritic, critic_arrays, load_critic_arrays
+from ilfo.rewards.adversarial import (
+    AdversarialCritic,
+    critic_arrays,
+    load_critic_arrays,
+    pending_atoms,
+)
 from ilfo.rewards.base import (
     RewardOutput,
     RewardState,
@@ -283,17 +288,9 @@ class SIL:
         self, k: int, entry: dict[str, Any], arrays: dict[str, np.ndarray], params: Any
     ) -> _Pending:
         demo, phase = int(entry["demo"]), int(entry["phase"])
-        atoms = arrays.get(f"pending/{k}")
-        if atoms is None:
-            raise ValueError(f"reward state lists pending episode {k} but has no pending/{k} array")
-        atoms = np.asarray(atoms, dtype=np.float64)
+        atoms = pending_atoms(arrays, k, 2 * self.obs_dim)
         if not 0 <= demo < len(self.expert_atoms) or not 0 <= phase < len(self.expert_atoms[demo]):
             raise ValueError(f"pending episode {k}: demo {demo}, phase {phase} fit no demo here")
-        if atoms.ndim != 2 or atoms.shape[1] != 2 * self.obs_dim:
-            raise ValueError(
-                f"pending episode {k} has atoms of shape {atoms.shape}, expected (T, "
-                f"{2 * self.obs_dim})"
-            )
         coupling = self._solve(atoms, demo, phase, params)
         return _Pending(
             atoms, demo, phase, coupling.plan, coupling.cost, float(entry["reward_sum"])
