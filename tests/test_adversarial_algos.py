@@ -1,5 +1,6 @@
 """SIL-(s,s') (TRPO, on-policy) and OOPS_adv (TD3) end to end through the training loop."""
 
+import itertools
 import json
 
 import numpy as np
@@ -11,6 +12,7 @@ from test_train import TINY, _metrics, _train
 
 SIL_TINY = dict(
     algo="sil",
+    fixed_horizon=True,  # 100-step episodes: the batches below end where the test says
     trpo={"hidden": (16, 16), "batch_steps": 200, "value_iters": 5},
     sil={"critic_hidden": (16, 16), "critic_features": 8, "expert_subsample": 5},
 )
@@ -97,6 +99,19 @@ def test_sil_flags_reach_config_json_and_the_policy_reads_back(tmp_path):
     assert config["sil"]["seed"] == config["seed"]
     assert config["td3"] is None and config["oops"] is None
     assert main(["eval", str(run), "--episodes", "1", "--json"]) == 0
+
+
+def test_sil_trains_on_standard_episodes_by_default_and_learns_per_batch(tmp_path):
+    assert not TrainConfig(algo="sil").uses_fixed_horizon  # the authors' code: falls end them
+    assert TrainConfig(algo="oops-adv-td3").uses_fixed_horizon  # ilfo's imitation protocol
+    standard = {k: v for k, v in SIL_TINY.items() if k != "fixed_horizon"}
+    rows = _metrics(_train(tmp_path, "run", **{**standard, "steps": 400}))
+    # A random Hopper falls within tens of steps: episodes end there, and a batch is whole
+    # episodes of at least 200 steps.
+    assert int(rows[0]["step"]) < 100
+    learned = [int(r["step"]) for r in rows if r["critic_loss"]]
+    assert learned and learned[0] >= 200
+    assert all(b - a >= 200 for a, b in itertools.pairwise(learned))
 
 
 def test_trpo_and_sil_settings_do_not_apply_to_other_algos():

@@ -110,6 +110,10 @@ class Recipe:
     """One line for ``--help`` and the docs."""
     adapt_agent: Callable[[Any], Any] | None = None
     """A change applied to the agent's config after the run's (e.g. ``ddpg_config``)."""
+    fixed_horizon: bool | None = None
+    """The episodes it trains on when a run does not say (``TrainConfig.fixed_horizon``): None,
+    ilfo's protocol (fixed-horizon for imitation, standard for the task reward); False:
+    standard episodes, ending at a fall, where the algo's own code needs them (SIL)."""
     part_defaults: Callable[[str], dict[str, Any]] | None = None
     """``part_defaults(env_id)`` -> {part name: config}: the recipe's own defaults for its
     parts, where a run gives none (a baseline's authors' settings, which may differ by env),
@@ -320,6 +324,10 @@ RECIPES: tuple[Recipe, ...] = (
         "sil",
         "SIL-(s,s'): Sinkhorn imitation with an adversarial critic's cost + TRPO (Papagiannis "
         "& Li)",
+        # Its reward is -2 c_t + 4 / T over a running std with no mean subtracted: with T fixed
+        # at the horizon every reward clips at +10 (docs/reproduction.md); the authors' code
+        # ends episodes at falls.
+        fixed_horizon=False,
     ),
     Recipe(
         "gaifo-td3",

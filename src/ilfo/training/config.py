@@ -54,7 +54,7 @@ class TrainConfig:
     """Seed of everything: environment, exploration, networks, demo draws."""
     fixed_horizon: bool | None = None
     """Run every episode to the full horizon, ignoring termination (the paper); None: on for
-    imitation, off for true-reward algos."""
+    imitation (except sil: off, as its authors' code), off for true-reward algos."""
     horizon: int | None = None
     """Episode length; None: the environment's limit (1,000 for MuJoCo)."""
     healthy_angle_range: tuple[float, float] | None = None
@@ -175,8 +175,13 @@ class TrainConfig:
 
     @property
     def uses_fixed_horizon(self) -> bool:
-        """The resolved ``fixed_horizon``."""
-        return self.imitation if self.fixed_horizon is None else self.fixed_horizon
+        """The resolved ``fixed_horizon``: as given, else the algo's (``Recipe.fixed_horizon``),
+        else on for imitation and off for the task reward."""
+        if self.fixed_horizon is not None:
+            return self.fixed_horizon
+        if self.recipe.fixed_horizon is not None:
+            return self.recipe.fixed_horizon
+        return self.imitation
 
     def part_config(self, part: str) -> Any:
         """The config of part ``part`` (a field name: ``td3``, ``oops``, ...) as given, else its
