@@ -27,7 +27,7 @@ from ilfo.experiments import (
 )
 from ilfo.experiments.worker import pin_from_environment, thread_environment
 from ilfo.training import RunLock
-from ilfo.training.run_dir import CHECKPOINT_FILES, FINAL_POLICY_FILE
+from ilfo.training.run_dir import CHECKPOINT_FILES, FINAL_POLICY_FILE, REPLAY_FILE
 
 TINY = {
     "demos": str(Path(__file__).parents[2] / "data" / "demos" / "Hopper-v5-scripted.npz"),
@@ -121,7 +121,7 @@ def _finish(sweep, name, step=None):
     run = sweep.run(name)
     ckpt = sweep.run_dir(name) / "checkpoints" / f"step_{step or run.steps}"
     ckpt.mkdir(parents=True)
-    for file in CHECKPOINT_FILES:
+    for file in (*CHECKPOINT_FILES, REPLAY_FILE):
         (ckpt / file).write_text("x")
     (sweep.run_dir(name) / FINAL_POLICY_FILE).write_text("x")
 

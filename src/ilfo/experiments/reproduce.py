@@ -69,9 +69,12 @@ STEPS_PER_CORE_SECOND: dict[str, float] = {
     "gaifo-td3": 92.0,
     "opolo": 70.0,
     "firl-fkl": 77.0,
+    "oops-adv-td3": 140.0,
+    "sil": 300.0,
 }
 """For the estimate only: half the 2-core loop rates of ``bench/train.py`` (docs/benchmarks.md,
-2026-12-01; fast preset, Hopper); the paper preset runs at about a third of the fast one."""
+2026-12-01; fast preset, Hopper); the paper preset runs at about a third of the fast one.
+oops-adv-td3 and sil: from short probes on Hopper (2026-12-02, docs/benchmarks.md)."""
 
 
 @dataclass(frozen=True)
