@@ -382,8 +382,6 @@ class Trainer:
         batch = OnPolicyBatch(data.obs, data.action, data.reward, episode_end)
         self.state, learned = self.agent.functions.learn(self.state, batch)
         self._policy_changed = True
-        self.refill_until = 0
-        """Updates wait until this step (a run continued from a snapshot refills its buffer)."""
         metrics = {
             "critic_loss" if k == "value_loss" else f"agent_{k}": float(v)
             for k, v in learned.items()
@@ -408,18 +406,14 @@ class Trainer:
         """Fix the networks' normaliser once, when the policy takes over: see
         ``build.network_normalizer``. An on-policy agent has no random phase: its normaliser
         is the demos' states' (mean, std floored as there)."""
-        if self.agent.on_policy and not self.random_states and self.demos:
-            mean, std = network_normalizer(np.concatenate([d[:-1] for d in self.demos]), [])
-            if self.agent.time_feature:
-                mean, std = np.append(mean, 0.0), np.append(std, 1.0)
-            self.state = self.agent.functions.set_normalizer(self.state, mean, std)
-            return
-        random_states = (
-            np.concatenate(self.random_states)
-            if self.random_states
-            else np.zeros((1, self.obs_dim))
-        )
-        mean, std = network_normalizer(random_states, [d[:-1] for d in self.demos])
+        demo_states = [d[:-1] for d in self.demos]
+        if self.agent.on_policy and demo_states:
+            states, expert = np.concatenate(demo_states), []
+        elif self.random_states:
+            states, expert = np.concatenate(self.random_states), demo_states
+        else:
+            states, expert = np.zeros((1, self.obs_dim)), demo_states
+        mean, std = network_normalizer(states, expert)
         if self.agent.time_feature:  # the time feature is already in [0, 1]
             mean, std = np.append(mean, 0.0), np.append(std, 1.0)
         self.state = self.agent.functions.set_normalizer(self.state, mean, std)
