@@ -84,7 +84,7 @@ def test_convert_round_trips(capsys, tmp_path):
     back = demos.load(out)
     assert back.env_id == "Reacher-v5" and back.provenance["source_format"] == "imitation"
     for got, want in zip(back.episodes, obs, strict=True):
-        np.testing.assert_array_equal(got.observations, want)
+        np.testing.assert_array_equal(got.observations, want.astype(np.float32))
     assert main([*args, "--env-id", "Reacher-v5"]) == 2
     assert "--force" in capsys.readouterr().err
 
@@ -93,7 +93,7 @@ def test_convert_round_trips(capsys, tmp_path):
     back = demos.load(out)
     assert back.env_id == "Hopper-v5" and back.provenance["dataset_id"] == "hopper/expert-v0"
     for got, want in zip(back.episodes, obs, strict=True):
-        np.testing.assert_array_equal(got.observations, want)
+        np.testing.assert_array_equal(got.observations, want.astype(np.float32))
         assert got.task_return == 2.0 * (len(want) - 1)
 
     # ilfo -> ilfo with an env id override: recorded in the provenance.

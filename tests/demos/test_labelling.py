@@ -65,8 +65,9 @@ def test_ilfo_round_trip(tmp_path):
     out = demos.load(tmp_path / "out.npz")
     labeller = EpisodeLabeller(expert)
     for got, want in zip(out.episodes, episodes, strict=True):
-        np.testing.assert_array_equal(got.observations, want.observations)
-        np.testing.assert_array_equal(got.actions, want.actions)
+        # Saved as float32 (rewards as float64, from the observations as given).
+        np.testing.assert_array_equal(got.observations, want.observations.astype(np.float32))
+        np.testing.assert_array_equal(got.actions, want.actions.astype(np.float32))
         np.testing.assert_allclose(got.rewards, labeller(want.observations))
     with pytest.raises(FileExistsError):
         label_dataset(data, demo_path, tmp_path / "out.npz")

@@ -25,12 +25,38 @@ def test_round_trip(tmp_path, with_extras):
     assert loaded.env_id == "Hopper-v5" and loaded.provenance == {"policy": "test"}
     assert len(loaded.episodes) == 2
     for got, want in zip(loaded.episodes, episodes, strict=True):
-        np.testing.assert_array_equal(got.observations, want.observations)
+        np.testing.assert_array_equal(got.observations, want.observations.astype(np.float32))
         if with_extras:
-            np.testing.assert_array_equal(got.actions, want.actions)
+            np.testing.assert_array_equal(got.actions, want.actions.astype(np.float32))
+            assert got.rewards.dtype == np.float64
             assert got.task_return == pytest.approx(want.rewards.sum())
         else:
             assert got.actions is None and got.task_return is None
+
+
+def test_compact_storage_only_where_float32_loses_nothing(tmp_path):
+    rng = np.random.default_rng(2)
+    obs = rng.normal(size=(50, 3)) * [1.0, 100.0, 1e-3]
+    path = tmp_path / "c.npz"
+    demos.save(path, [Episode(obs)], "Hopper-v5")
+    got = demos.load(path).episodes[0].observations
+    assert got.dtype == np.float32
+    error = np.abs(got - obs).max(axis=0)
+    assert (error <= demos.npz.FLOAT32_TOLERANCE * obs.std(axis=0)).all()
+    # compact=False keeps float64 exactly.
+    demos.save(path, [Episode(obs)], "Hopper-v5", compact=False)
+    np.testing.assert_array_equal(demos.load(path).episodes[0].observations, obs)
+    # A column that varies by less than float32 resolves around its mean stays float64.
+    tight = obs.copy()
+    tight[:, 0] = 1000.0 + 1e-6 * rng.normal(size=50)
+    assert not demos.npz.float32_is_lossless(tight)
+    demos.save(path, [Episode(tight)], "Hopper-v5")
+    np.testing.assert_array_equal(demos.load(path).episodes[0].observations, tight)
+    # Constant columns round the same in every row: float32 where the constant survives.
+    const = np.column_stack([np.full(50, 0.1), obs[:, 1]])
+    assert demos.npz.float32_is_lossless(const)
+    assert not demos.npz.float32_is_lossless(np.column_stack([np.full(50, 1e39), obs[:, 1]]))
+    assert not demos.npz.float32_is_lossless(np.arange(6).reshape(3, 2))  # integers
 
 
 def test_terminations_round_trip_and_score(tmp_path):

@@ -124,12 +124,15 @@ def _write_imitation(path, episodes, infos=True, rews=True):
     return path
 
 
-def _assert_same(got, want, obs_only=False):
+def _assert_same(got, want, obs_only=False, saved=False):
+    """``saved``: ``got`` went through ``demos.save``, which stores these observations and
+    actions as float32 (rewards as float64)."""
     assert len(got) == len(want)
+    dtype = np.float32 if saved else None
     for g, w in zip(got, want, strict=True):
-        np.testing.assert_array_equal(g.observations, w.observations)
+        np.testing.assert_array_equal(g.observations, np.asarray(w.observations, dtype))
         if not obs_only:
-            np.testing.assert_array_equal(g.actions, w.actions)
+            np.testing.assert_array_equal(g.actions, np.asarray(w.actions, dtype))
             np.testing.assert_array_equal(g.rewards, w.rewards)
 
 
@@ -263,7 +266,7 @@ def test_ilfo_files_read_as_with_load(tmp_path):
     assert demos.detect_format(path) == "ilfo"
     got = demos.load_any(path)
     assert got.env_id == "Hopper-v5" and got.provenance == {"policy": "x"}
-    _assert_same(got.episodes, episodes)
+    _assert_same(got.episodes, episodes, saved=True)
 
 
 def test_every_format_converts_to_ilfo_and_back(tmp_path):
@@ -279,7 +282,7 @@ def test_every_format_converts_to_ilfo_and_back(tmp_path):
         demos.save(out, data.episodes, data.env_id, data.provenance)
         back = demos.load(out)
         assert back.env_id == "Hopper-v5" and back.provenance == data.provenance
-        _assert_same(back.episodes, episodes)
+        _assert_same(back.episodes, episodes, saved=True)
 
 
 def test_summarize(tmp_path):
