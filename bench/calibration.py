@@ -10,6 +10,7 @@ that ranks behaviour like the task does has a high rank correlation between the 
     python bench/calibration.py                        # Hopper-v5, table
     python bench/calibration.py --env Hopper-v5 --episodes 5 --json
     python bench/calibration.py --metric euclidean     # one of the paper's cost ablations
+    python bench/calibration.py --env Humanoid-v5 --no-contact-forces  # as the paper's v2 saw it
 """
 
 from __future__ import annotations
@@ -45,22 +46,30 @@ def main() -> None:
     parser.add_argument(
         "--atoms", default="transitions", choices=("transitions", "states"), help="OOPS atoms"
     )
+    parser.add_argument(
+        "--no-contact-forces",
+        dest="contact_forces",
+        action="store_false",
+        help="Ant-v5, Humanoid-v5: reward the states without their contact forces",
+    )
     parser.add_argument("--json", action="store_true", help="one JSON line per policy")
     args = parser.parse_args()
 
     stamp = {"date": date.today().isoformat(), "machine": machine(), "metric": args.metric,
-             "atoms": args.atoms}  # fmt: skip
+             "atoms": args.atoms, "contact_forces": args.contact_forces}  # fmt: skip
     points = calibrate(
         args.env,
         NOISE_LEVELS,
         args.episodes,
         OOPSConfig(metric=args.metric, atoms=args.atoms),
         expert_directory=args.expert,
+        contact_forces=args.contact_forces,
     )
     if not args.json:
         print(
             f"{args.env}, {args.episodes} episodes per row, OOPS ({args.metric}, "
             f"{args.atoms}) against demo 0"
+            + ("" if args.contact_forces else ", states without their contact forces")
         )
         print(f"{'policy':>14} {'task score':>11} {'proxy return':>13} {'OT distance':>12}")
     for name in dict.fromkeys(p.policy for p in points):

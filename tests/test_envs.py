@@ -1,7 +1,13 @@
 import numpy as np
 import pytest
 
-from ilfo.envs import episode_scores, make_env, termination_is_finish
+from ilfo.envs import (
+    CONTACT_FORCE_DIMS,
+    drop_contact_forces,
+    episode_scores,
+    make_env,
+    termination_is_finish,
+)
 
 
 def _run(env, seed):
@@ -50,6 +56,27 @@ def test_healthy_angle_range_makes_falls_stricter():
         make_env("HalfCheetah-v5", healthy_angle_range=(-0.1, 0.1))
     with pytest.raises(ValueError, match="low < high"):
         make_env("Hopper-v5", healthy_angle_range=(0.1, -0.1))
+
+
+@pytest.mark.parametrize("env_id", ["Ant-v5", "Humanoid-v5"])
+def test_without_contact_forces_the_same_states_lack_only_their_last_columns(env_id):
+    full, reduced = make_env(env_id, seed=3), make_env(env_id, seed=3, contact_forces=False)
+    assert reduced.observation_space.shape[0] == (
+        full.observation_space.shape[0] - CONTACT_FORCE_DIMS[env_id]
+    )
+    obs_full, obs_reduced = [full.reset(seed=3)[0]], [reduced.reset(seed=3)[0]]
+    for action in np.random.default_rng(0).uniform(-0.4, 0.4, (60, full.action_space.shape[0])):
+        obs_full.append(full.step(action)[0])
+        obs_reduced.append(reduced.step(action)[0])
+    obs_full = np.array(obs_full)
+    assert np.abs(obs_full[:, -CONTACT_FORCE_DIMS[env_id] :]).max() > 0  # touches the floor
+    np.testing.assert_array_equal(drop_contact_forces(obs_full, env_id), np.array(obs_reduced))
+    with pytest.raises(ValueError, match="not Hopper-v5"):
+        make_env("Hopper-v5", contact_forces=False)
+    with pytest.raises(ValueError, match="no contact forces"):
+        drop_contact_forces(obs_full, "Hopper-v5")
+    with pytest.raises(ValueError, match="cannot hold"):
+        drop_contact_forces(obs_full[:, :10], env_id)
 
 
 def test_unknown_env_is_a_clear_error():

@@ -114,6 +114,25 @@ def test_cli_train_and_eval_and_plot(tmp_path, capsys):
     assert out.stat().st_size > 0
 
 
+def test_without_contact_forces_the_run_and_its_demos_drop_them(tmp_path):
+    from ilfo.evaluate import evaluate_run
+    from ilfo.experiments.distances import final_rollouts
+    from ilfo.training import load_demo_set
+
+    ant = {**TINY, "env": "Ant-v5", "demos": None, "num_demos": 1, "contact_forces": False}
+    run = _train(tmp_path, "ant", **ant, steps=300)
+    assert json.loads((run / "config.json").read_text())["contact_forces"] is False
+    demos = load_demo_set(TrainConfig(**ant), obs_dim=27)  # the shipped 105-dim demos, sliced
+    assert demos.observations[0].shape == (1001, 27)
+    rows = _metrics(run)
+    assert len(rows) == 3 and rows[1]["eval_score"] and rows[1]["eval_ot_distance"]
+    rollouts, experts = final_rollouts(run, episodes=1, experts=1)
+    assert rollouts[0].observations.shape[1] == experts[0].observations.shape[1] == 27
+    assert evaluate_run(run, episodes=1)["score_mean"] is not None
+    with pytest.raises(ValueError, match="have observations of dimension 105"):
+        load_demo_set(TrainConfig(**{**ant, "contact_forces": True}), obs_dim=27)
+
+
 def test_demos_in_which_the_expert_fell_are_named_in_a_warning(tmp_path):
     import warnings
 

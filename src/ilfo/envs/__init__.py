@@ -2,7 +2,14 @@
 the fixed-horizon protocol as plain gymnasium wrappers (``wrappers``) for any RL code."""
 
 from ilfo.envs.bullet import BULLET_ENVS
-from ilfo.envs.make import HEALTHY_ANGLE_ENVS, SUPPORTED_ENVS, make_env, termination_is_finish
+from ilfo.envs.make import (
+    CONTACT_FORCE_DIMS,
+    HEALTHY_ANGLE_ENVS,
+    SUPPORTED_ENVS,
+    drop_contact_forces,
+    make_env,
+    termination_is_finish,
+)
 from ilfo.envs.wrappers import (
     FixedHorizonScore,
     IgnoreTermination,
@@ -13,11 +20,13 @@ from ilfo.envs.wrappers import (
 
 __all__ = [
     "BULLET_ENVS",
+    "CONTACT_FORCE_DIMS",
     "HEALTHY_ANGLE_ENVS",
     "SUPPORTED_ENVS",
     "FixedHorizonScore",
     "IgnoreTermination",
     "TimeFeature",
+    "drop_contact_forces",
     "episode_scores",
     "make_env",
     "termination_is_finish",

@@ -14,6 +14,7 @@ from __future__ import annotations
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
 from ilfo.envs.bullet import BULLET_ENVS, register_bullet_envs
 from ilfo.envs.wrappers import IgnoreTermination
@@ -35,6 +36,11 @@ SUPPORTED_ENVS: tuple[str, ...] = (
 HEALTHY_ANGLE_ENVS: tuple[str, ...] = ("Hopper-v5", "Walker2d-v5")
 """Envs whose torso must stay in a healthy angle range (``make_env``'s ``healthy_angle_range``)."""
 
+CONTACT_FORCE_DIMS: dict[str, int] = {"Ant-v5": 78, "Humanoid-v5": 78}
+"""Envs whose observations end with the bodies' external contact forces (``cfrc_ext``, 13 bodies
+x 6), and how many columns those are. The paper's v2 versions of these tasks carried them as
+zeros (mujoco-py >= 2.0 left them unfilled); ``make_env(..., contact_forces=False)`` drops them."""
+
 
 def make_env(
     env_id: str,
@@ -43,6 +49,7 @@ def make_env(
     horizon: int | None = None,
     render_mode: str | None = None,
     healthy_angle_range: tuple[float, float] | None = None,
+    contact_forces: bool = True,
 ) -> gym.Env:
     """Make a gymnasium environment.
 
@@ -57,13 +64,18 @@ def make_env(
             Walker2d is unhealthy (a fall: termination, no healthy reward); None: the env's
             own, (-0.2, 0.2) for Hopper-v5, (-1, 1) for Walker2d-v5. A stricter range trains
             experts that keep a margin from a fall (docs/experts.md).
+        contact_forces: False drops the contact forces that end Ant-v5's and Humanoid-v5's
+            observations (:data:`CONTACT_FORCE_DIMS`; gymnasium's
+            ``include_cfrc_ext_in_observation=False``): the information the paper's v2 tasks
+            gave, whose contact forces were all zero.
 
     Returns:
         The environment, with ``env.spec.max_episode_steps`` equal to the horizon.
 
     Raises:
         ValueError: Unknown ``env_id``, a gymnasium optional dependency is missing, or a
-            ``healthy_angle_range`` that is not (low < high) or for an env without one.
+            ``healthy_angle_range`` that is not (low < high) or for an env without one, or
+            ``contact_forces=False`` for an env without contact forces in its observations.
         ImportError: A Minitaur id without PyBullet (``pip install -e ".[bullet]"``).
     """
     try:
@@ -83,6 +95,12 @@ def make_env(
         if not low < high:
             raise ValueError(f"healthy_angle_range needs low < high, got {healthy_angle_range}")
         kwargs["healthy_angle_range"] = (low, high)
+    if not contact_forces:
+        if env_id not in CONTACT_FORCE_DIMS:
+            raise ValueError(
+                f"contact_forces=False applies to {', '.join(CONTACT_FORCE_DIMS)}, not {env_id}"
+            )
+        kwargs["include_cfrc_ext_in_observation"] = False
     try:
         env = gym.make(env_id, max_episode_steps=limit, render_mode=render_mode, **kwargs)
     except gym.error.DependencyNotInstalled as err:
@@ -102,6 +120,26 @@ def make_env(
 # course (a normal shaping reward). In fixed-horizon episodes the walker walks on past the
 # finish, every later step reported as terminated, so the fixed-horizon score counts them 0.
 _FALL_REWARD = {"BipedalWalker-v3": -100.0}
+
+
+def drop_contact_forces(observations: np.ndarray, env_id: str) -> np.ndarray:
+    """Observations (..., d) of ``env_id`` with all its columns, without the contact forces at
+    their end: what ``make_env(env_id, contact_forces=False)`` observes.
+
+    Raises:
+        ValueError: ``env_id`` has no contact forces in its observations, or ``observations``
+            are too narrow to hold them.
+    """
+    if env_id not in CONTACT_FORCE_DIMS:
+        raise ValueError(f"{env_id} has no contact forces in its observations")
+    observations = np.asarray(observations)
+    kept = observations.shape[-1] - CONTACT_FORCE_DIMS[env_id]
+    if kept < 1:
+        raise ValueError(
+            f"observations of dimension {observations.shape[-1]} cannot hold {env_id}'s "
+            f"{CONTACT_FORCE_DIMS[env_id]} contact-force columns"
+        )
+    return observations[..., :kept]
 
 
 def termination_is_finish(env_id: str, reward: float) -> bool:

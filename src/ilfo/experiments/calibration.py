@@ -43,11 +43,14 @@ def calibrate(
     oops: OOPSConfig | None = None,
     expert_directory: str | Path | None = None,
     horizon: int | None = None,
+    contact_forces: bool = True,
 ) -> list[CalibrationPoint]:
     """Every (policy, episode) of the calibration of ``env_id``'s expert (see the module);
-    ``horizon`` shortens the episodes (None: the expert's)."""
+    ``horizon`` shortens the episodes (None: the expert's). ``contact_forces=False`` (Ant-v5,
+    Humanoid-v5): OOPS rewards the states without their contact forces (the expert still acts
+    on all of them), as ``ilfo train --no-contact-forces`` does."""
     from ilfo import demos
-    from ilfo.envs import episode_scores, make_env
+    from ilfo.envs import drop_contact_forces, episode_scores, make_env
     from ilfo.experts import expert_dir, load_expert
     from ilfo.rewards import OOPS
 
@@ -58,7 +61,11 @@ def calibrate(
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
     demo = demos.load(directory / "demos.npz").episodes[0].observations
-    rewarder = OOPS([demo], oops or OOPSConfig())
+
+    def reward_view(observations: np.ndarray) -> np.ndarray:
+        return observations if contact_forces else drop_contact_forces(observations, env_id)
+
+    rewarder = OOPS([reward_view(demo)], oops or OOPSConfig())
     steps = horizon or expert.horizon
     env = make_env(env_id, fixed_horizon=True, horizon=steps)
     low, high = env.action_space.low, env.action_space.high
@@ -88,7 +95,7 @@ def calibrate(
                     rewards.append(reward)
                     fell.append(info["env_terminated"])
                 score = episode_scores(np.array(rewards), np.array(fell))[0]
-                out = rewarder(np.asarray(observations))
+                out = rewarder(reward_view(np.asarray(observations)))
                 name = f"expert + N(0, {kind}^2)" if not isinstance(kind, str) else kind
                 noise = None if isinstance(kind, str) else float(kind)
                 points.append(

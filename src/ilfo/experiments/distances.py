@@ -89,6 +89,7 @@ def final_rollouts(
     """A run's final policy's ``episodes`` deterministic fixed-horizon rollouts (seeds from
     ``first_seed``, apart from training's and evaluation's) and the first ``experts``
     trajectories of its demo file."""
+    from ilfo.envs import drop_contact_forces
     from ilfo.training import default_demos_path, load_run_policy, rollout_policy
 
     loaded = load_run_policy(run_dir, "final")
@@ -102,7 +103,13 @@ def final_rollouts(
     finally:
         env.close()
     demo_file = config.demos or default_demos_path(config.env)
-    return rollouts, demo_trajectories(demo_file, experts)
+    expert_trajectories = demo_trajectories(demo_file, experts)
+    if not config.contact_forces:  # the space the run observed
+        expert_trajectories = [
+            Trajectory(drop_contact_forces(t.observations, config.env), t.actions)
+            for t in expert_trajectories
+        ]
+    return rollouts, expert_trajectories
 
 
 def run_distances(

@@ -22,7 +22,7 @@ from ilfo import demos as demo_io
 from ilfo.agents import AgentFunctions
 from ilfo.agents.base import OnPolicyAgentFunctions
 from ilfo.algos import AGENT_PARTS, REWARD_PARTS, LearnedRewardPart, RewardPart
-from ilfo.envs import make_env
+from ilfo.envs import drop_contact_forces, make_env
 from ilfo.paths import DATA_DIR
 from ilfo.rewards import OOPS, EpisodeReward, expert_transitions
 from ilfo.training.config import TrainConfig
@@ -59,10 +59,20 @@ def make_envs(config: TrainConfig) -> tuple[gym.Env, gym.Env, EnvInfo]:
     evaluation environment (always fixed-horizon, the paper's score) and their ``EnvInfo``."""
     angles = config.healthy_angle_range
     env = make_env(
-        config.env, config.uses_fixed_horizon, horizon=config.horizon, healthy_angle_range=angles
+        config.env,
+        config.uses_fixed_horizon,
+        horizon=config.horizon,
+        healthy_angle_range=angles,
+        contact_forces=config.contact_forces,
     )
     horizon = int(env.spec.max_episode_steps)
-    eval_env = make_env(config.env, True, horizon=horizon, healthy_angle_range=angles)
+    eval_env = make_env(
+        config.env,
+        True,
+        horizon=horizon,
+        healthy_angle_range=angles,
+        contact_forces=config.contact_forces,
+    )
     return env, eval_env, env_info(env, config.env)
 
 
@@ -98,6 +108,9 @@ def load_demo_set(config: TrainConfig, obs_dim: int) -> DemoSet:
         return DemoSet([], math.nan, None)
     episodes = load_demos(config)
     observations = [e.observations for e in episodes]
+    if not config.contact_forces and observations[0].shape[1] != obs_dim:
+        # Demos of the full observation: the same states without their contact forces.
+        observations = [drop_contact_forces(o, config.env) for o in observations]
     if observations[0].shape[1] != obs_dim:
         raise ValueError(
             f"demos have observations of dimension {observations[0].shape[1]}, "

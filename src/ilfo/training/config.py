@@ -16,6 +16,7 @@ from ilfo.agents.opolo import OPOLOConfig
 from ilfo.agents.trpo import TRPOConfig
 from ilfo.algos import AGENT_PARTS, ALGOS, PART_CONFIGS, Recipe, algos_using, recipe
 from ilfo.config import dataclass_from_dict
+from ilfo.envs.make import CONTACT_FORCE_DIMS
 from ilfo.rewards import DiscriminatorConfig, FIRLConfig, OOPSConfig, PWILConfig
 from ilfo.rewards.oops_adv import AdversarialOOPSConfig
 from ilfo.rewards.sil import SILConfig
@@ -62,6 +63,11 @@ class TrainConfig:
     run's training and evaluation episodes; None: the env's own ((-0.2, 0.2) for Hopper).
     Stricter ranges train experts with a margin from a fall; demos and the paper's scores always
     use the env's own range."""
+    contact_forces: bool = True
+    """Ant-v5 and Humanoid-v5: observe the bodies' contact forces (gymnasium's default). False
+    drops them from the learner's observations and from the demos' (the paper's v2 tasks had
+    them all zero); on Humanoid they are 98% of OOPS's distance once the learner has fallen
+    (docs/benchmarks.md, issue 26)."""
     eval_every: int = 5_000
     """Evaluate every this many environment steps."""
     eval_episodes: int = 10
@@ -162,6 +168,10 @@ class TrainConfig:
                     f"got {self.healthy_angle_range}"
                 )
             object.__setattr__(self, "healthy_angle_range", angles)
+        if not self.contact_forces and self.env not in CONTACT_FORCE_DIMS:
+            raise ValueError(
+                f"--no-contact-forces applies to {', '.join(CONTACT_FORCE_DIMS)}, not {self.env}"
+            )
 
     @property
     def recipe(self) -> Recipe:

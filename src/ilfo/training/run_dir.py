@@ -213,6 +213,7 @@ class RunPolicy:
             horizon=self.env.horizon,
             render_mode=render_mode,
             healthy_angle_range=self.config.healthy_angle_range,
+            contact_forces=self.config.contact_forces,
         )
 
 
@@ -254,6 +255,7 @@ def _probe_env(config: TrainConfig) -> Any:
         config.uses_fixed_horizon,
         horizon=config.horizon,
         healthy_angle_range=config.healthy_angle_range,
+        contact_forces=config.contact_forces,
     )
 
 
