@@ -91,7 +91,9 @@ class ExpertPolicy:
 
     def rollout(self, seed: int) -> Any:
         """One deterministic fixed-horizon episode (a ``train.Rollout``)."""
-        env = make_env(self.config.env, True, horizon=self.horizon)
+        env = make_env(
+            self.config.env, True, horizon=self.horizon, contact_forces=self.config.contact_forces
+        )
         return rollout_policy(env, self.agent, self.policy, self.horizon, seed=seed)
 
 
@@ -183,7 +185,7 @@ def load_expert(path: str | Path) -> ExpertPolicy:
     except (ValueError, KeyError, TypeError) as err:
         raise ValueError(f"{record_path} is not a readable expert record ({err})") from None
     config = config_from_dict(raw_config, record_path)
-    env = make_env(config.env, True, horizon=horizon)
+    env = make_env(config.env, True, horizon=horizon, contact_forces=config.contact_forces)
     agent = make_agent(config, env_info(env, config.env), demos=None)
     template = policy_of(agent.functions.init(config.seed))
     policy = load_msgpack(template, path / POLICY_FILE, "expert policy")
@@ -339,7 +341,9 @@ def evaluate_expert(
 ) -> dict[str, Any]:
     """Mean and std of an expert's fixed-horizon score and standard return."""
     expert = load_expert(path)
-    env = make_env(expert.config.env, True, horizon=expert.horizon)
+    env = make_env(
+        expert.config.env, True, horizon=expert.horizon, contact_forces=expert.config.contact_forces
+    )
     seeds = [first_seed + k for k in range(episodes)]
     scored = score_policy(env, expert.agent, expert.policy, expert.horizon, seeds)
     return {

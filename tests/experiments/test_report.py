@@ -95,6 +95,15 @@ def _fake_run(root, name, *, env, algo, seed, scores, steps=None, demos=None, nu
     return run
 
 
+def test_runs_without_contact_forces_are_a_cell_of_their_own(tmp_path):
+    run = _fake_run(tmp_path, "h", env="Humanoid-v5", algo="oops-td3", seed=0, scores=[0.5])
+    config = json.loads((run / "config.json").read_text())
+    (run / "config.json").write_text(json.dumps({**config, "contact_forces": False}))
+    _fake_run(tmp_path, "h1", env="Humanoid-v5", algo="oops-td3", seed=1, scores=[0.1])
+    runs, _ = collect_runs([tmp_path])
+    assert sorted(str(r.variant) for r in runs) == ["None", "no-contact-forces"]
+
+
 def test_report_over_a_fixture_against_hand_computations(tmp_path):
     finals = {0: 0.9, 1: 1.0, 2: 0.5}
     for seed, final in finals.items():

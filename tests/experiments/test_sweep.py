@@ -74,6 +74,14 @@ def test_variants_merge_into_the_parts():
     assert runs["states"].config["oops"]["atoms"] == "states"
 
 
+def test_dropping_contact_forces_applies_to_the_envs_that_observe_them():
+    spec = SweepSpec(env=("Hopper-v5", "Humanoid-v5"), config={**TINY, "contact_forces": False})
+    spec = dataclasses.replace(spec, config={k: v for k, v in spec.config.items() if k != "demos"})
+    runs = {r.config["env"]: r for r in expand(spec)}
+    assert runs["Humanoid-v5"].config["contact_forces"] is False
+    assert runs["Hopper-v5"].config["contact_forces"] is True
+
+
 @pytest.mark.parametrize(
     "kwargs, message",
     [
@@ -86,6 +94,7 @@ def test_variants_merge_into_the_parts():
         ({"config": {"steps": 0}}, "steps must be >= 1"),
         ({"variants": {"a__b": {}}}, "variant name"),
         ({"retries": -1}, "retries"),
+        ({"config": {"contact_forces": False}}, "none of its envs observe"),
     ],
 )
 def test_bad_specs_are_refused_clearly(kwargs, message):

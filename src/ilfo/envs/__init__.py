@@ -8,6 +8,7 @@ from ilfo.envs.make import (
     SUPPORTED_ENVS,
     drop_contact_forces,
     make_env,
+    match_observation_width,
     termination_is_finish,
 )
 from ilfo.envs.wrappers import (
@@ -29,6 +30,7 @@ __all__ = [
     "drop_contact_forces",
     "episode_scores",
     "make_env",
+    "match_observation_width",
     "termination_is_finish",
     "time_feature",
 ]

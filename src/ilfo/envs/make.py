@@ -142,6 +142,17 @@ def drop_contact_forces(observations: np.ndarray, env_id: str) -> np.ndarray:
     return observations[..., :kept]
 
 
+def match_observation_width(observations: np.ndarray, env_id: str, obs_dim: int) -> np.ndarray:
+    """``observations`` (..., d) fitted to an env observing ``obs_dim`` columns: without their
+    contact forces where they hold exactly ``obs_dim`` plus ``env_id``'s contact-force columns
+    (demos of the full observation, for a run with ``contact_forces=False``); as they are
+    otherwise (a mismatch is left for the caller to report)."""
+    extra = CONTACT_FORCE_DIMS.get(env_id)
+    if extra is not None and np.shape(observations)[-1] == obs_dim + extra:
+        return drop_contact_forces(observations, env_id)
+    return observations
+
+
 def termination_is_finish(env_id: str, reward: float) -> bool:
     """Whether a step on which ``env_id`` reported termination, with task ``reward``, is the
     task completed (BipedalWalker reaching the end of its course) rather than a fall.

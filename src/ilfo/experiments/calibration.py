@@ -62,12 +62,17 @@ def calibrate(
         raise ValueError(f"episodes must be >= 1, got {episodes}")
     demo = demos.load(directory / "demos.npz").episodes[0].observations
 
+    # An expert trained without contact forces observes none: nothing to drop.
+    drop = not contact_forces and expert.config.contact_forces
+
     def reward_view(observations: np.ndarray) -> np.ndarray:
-        return observations if contact_forces else drop_contact_forces(observations, env_id)
+        return drop_contact_forces(observations, env_id) if drop else observations
 
     rewarder = OOPS([reward_view(demo)], oops or OOPSConfig())
     steps = horizon or expert.horizon
-    env = make_env(env_id, fixed_horizon=True, horizon=steps)
+    env = make_env(
+        env_id, fixed_horizon=True, horizon=steps, contact_forces=expert.config.contact_forces
+    )
     low, high = env.action_space.low, env.action_space.high
     act_expert = expert.agent.functions.act
 

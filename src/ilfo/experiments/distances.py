@@ -89,7 +89,7 @@ def final_rollouts(
     """A run's final policy's ``episodes`` deterministic fixed-horizon rollouts (seeds from
     ``first_seed``, apart from training's and evaluation's) and the first ``experts``
     trajectories of its demo file."""
-    from ilfo.envs import drop_contact_forces
+    from ilfo.envs import match_observation_width
     from ilfo.training import default_demos_path, load_run_policy, rollout_policy
 
     loaded = load_run_policy(run_dir, "final")
@@ -106,7 +106,9 @@ def final_rollouts(
     expert_trajectories = demo_trajectories(demo_file, experts)
     if not config.contact_forces:  # the space the run observed
         expert_trajectories = [
-            Trajectory(drop_contact_forces(t.observations, config.env), t.actions)
+            Trajectory(
+                match_observation_width(t.observations, config.env, loaded.env.obs_dim), t.actions
+            )
             for t in expert_trajectories
         ]
     return rollouts, expert_trajectories

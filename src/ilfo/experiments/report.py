@@ -117,6 +117,8 @@ def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | Non
 
     run_dir = Path(run_dir)
     config = read_run_config(run_dir)
+    if variant is None and config.get("contact_forces", True) is False:
+        variant = "no-contact-forces"  # not the cell of runs that observed them
     if not (run_dir / "metrics.csv").is_file():  # a sweep's run before its first episode
         return None
     rows = [r for r in read_metrics(run_dir) if r.get(SCORE)]

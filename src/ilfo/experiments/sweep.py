@@ -173,6 +173,7 @@ def expand(spec: SweepSpec) -> list[SweepRun]:
     """Every run of the spec, each config built and checked now (an error names the run), in
     seed-major order so that a partly done sweep covers every cell with its first seeds."""
     from ilfo.algos import PART_CONFIGS, recipe
+    from ilfo.envs import CONTACT_FORCE_DIMS
     from ilfo.training import config_from_settings
 
     variants: list[tuple[str | None, Mapping[str, Any]]] = list(spec.variants.items()) or [
@@ -194,9 +195,20 @@ def expand(spec: SweepSpec) -> list[SweepRun]:
                         unused = [k for k in settings if k in PART_CONFIGS and k not in algo_parts]
                         parts_used |= {k for k in settings if k in PART_CONFIGS} - set(unused)
                         settings = {k: v for k, v in settings.items() if k not in unused}
+                        # Likewise dropping the contact forces, where the env observes them.
+                        if env not in CONTACT_FORCE_DIMS:
+                            settings.pop("contact_forces", None)
                         settings.update(env=env, algo=algo, num_demos=num_demos, seed=seed)
                         config = config_from_settings(settings, f"sweep run {name}")
                         runs.append(SweepRun(name, _config_record(config), variant))
+    sets_contact_forces = "contact_forces" in spec.config or any(
+        "contact_forces" in change for _, change in variants
+    )
+    if sets_contact_forces and not set(spec.env) & set(CONTACT_FORCE_DIMS):
+        raise ValueError(
+            f"sweep config sets contact_forces, which none of its envs observe "
+            f"({', '.join(spec.env)}; only {', '.join(CONTACT_FORCE_DIMS)} do)"
+        )
     unused_parts = sorted(parts_given - parts_used)
     if unused_parts:
         raise ValueError(

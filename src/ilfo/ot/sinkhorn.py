@@ -42,6 +42,7 @@ _NEWTON_BACKTRACKS = 30
 _NEWTON_RIDGE = 1e-10
 _NEWTON_MAX_STEP = 30.0
 _NEWTON_POOR_STEPS = 3  # consecutive Newton steps that fail to halve the error before giving up
+_NEWTON_MAX_STEPS = 30  # each an m x m Cholesky: beyond this Sinkhorn goes on instead
 _WARMUP = 10  # plain iterations before the first estimate: the first ones are transient
 _MAX_SCALE = 1e12  # largest |cost| / reg whose kernel float64 resolves (_check_resolution)
 
@@ -128,7 +129,7 @@ def _solve(
     u = np.ones_like(a)
     v = np.ones_like(b)
     omega = 1.0
-    errors = np.empty(max_iter)
+    errors = np.full(max_iter, np.nan)  # NaN where Newton stepped: omega's rate then holds
     converged = False
     newton_allowed = acceleration == "newton"
     iterations = 0
@@ -173,7 +174,7 @@ def _solve(
         if not switch_to_newton:
             break
         # Newton works on the side with fewer atoms: its linear system has that size.
-        budget = max_iter - iterations
+        budget = min(max_iter - iterations, _NEWTON_MAX_STEPS)
         if len(b) <= len(a):
             u, v, steps, converged = _newton(kernel, a, b, v, tol, budget)
         else:

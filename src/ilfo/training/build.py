@@ -22,7 +22,7 @@ from ilfo import demos as demo_io
 from ilfo.agents import AgentFunctions
 from ilfo.agents.base import OnPolicyAgentFunctions
 from ilfo.algos import AGENT_PARTS, REWARD_PARTS, LearnedRewardPart, RewardPart
-from ilfo.envs import drop_contact_forces, make_env
+from ilfo.envs import make_env, match_observation_width
 from ilfo.paths import DATA_DIR
 from ilfo.rewards import OOPS, EpisodeReward, expert_transitions
 from ilfo.training.config import TrainConfig
@@ -108,9 +108,8 @@ def load_demo_set(config: TrainConfig, obs_dim: int) -> DemoSet:
         return DemoSet([], math.nan, None)
     episodes = load_demos(config)
     observations = [e.observations for e in episodes]
-    if not config.contact_forces and observations[0].shape[1] != obs_dim:
-        # Demos of the full observation: the same states without their contact forces.
-        observations = [drop_contact_forces(o, config.env) for o in observations]
+    if not config.contact_forces:  # demos of the full observation: the states without them
+        observations = [match_observation_width(o, config.env, obs_dim) for o in observations]
     if observations[0].shape[1] != obs_dim:
         raise ValueError(
             f"demos have observations of dimension {observations[0].shape[1]}, "
