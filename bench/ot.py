@@ -4,6 +4,8 @@ Cases (atoms (s_t, s_t+1) standardised as the paper's code does, cost sqrt(L2), 
   typical   1000 x 1000   learner = a random-action episode, expert = a gait episode, tol 1e-9
   pooled    1000 x 10000  the same learner against 10 gait episodes pooled, tol 1e-9
   near      1000 x 1000   learner = expert + small noise (ill-conditioned), tol 1e-6
+  expert    1000 x 1000   two episodes of the shipped Hopper expert (demos 6 and 0), tol 1e-9:
+                          a learner that has caught up with the expert
 Methods: ilfo (default: over-relaxation + Newton), ilfo plain (no acceleration), ilfo warm
 (near case: warm start from the potentials of another noise draw, as from the previous episode),
 POT `sinkhorn` (kernel domain) and `sinkhorn_log` (what the paper's code ran), and POT `emd`.
@@ -15,7 +17,8 @@ marginal error and its largest difference from ilfo's plan.
     python bench/ot.py --json     # one JSON line per case and method
     python bench/ot.py --quick    # sinkhorn_log capped at 500 iterations (time extrapolated)
 
-Data: data/demos/Hopper-v5-scripted.npz (scripted policies, see the README).
+Data: data/demos/Hopper-v5-scripted.npz (scripted policies, see the README), and the shipped
+Hopper expert's demos (data/experts/Hopper-v5/demos.npz) for the expert case.
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ import ot as pot
 from ilfo import demos
 from ilfo.benchmarking import machine
 from ilfo.ot import OTResult, cost_matrix, emd, marginal_error, sinkhorn
-from ilfo.paths import bundled_demos
+from ilfo.paths import DATA_DIR, bundled_demos
 from ilfo.rewards import Standardizer, make_atoms
 
 REG = 0.05
@@ -64,10 +67,18 @@ def cases(noise: float) -> dict[str, tuple[np.ndarray, list[np.ndarray], float]]
     def atoms(s: Standardizer, obs: np.ndarray) -> np.ndarray:
         return make_atoms(s(obs), "transitions")
 
+    shipped = demos.load(DATA_DIR / "experts" / "Hopper-v5" / "demos.npz").episodes
+    shipped_std = Standardizer.from_demos([shipped[0].observations])
+
     return {
         "typical": (atoms(std, learner), [atoms(std, expert)], 1e-9),
         "pooled": (atoms(pooled_std, learner), [atoms(pooled_std, g) for g in gait], 1e-9),
         "near": (atoms(std, noisy), [atoms(std, expert)], 1e-6, atoms(std, noisy_prev)),
+        "expert": (
+            atoms(shipped_std, shipped[6].observations),
+            [atoms(shipped_std, shipped[0].observations)],
+            1e-9,
+        ),
     }
 
 
@@ -210,7 +221,7 @@ def main() -> None:
             f"| {r['plan_diff']:.1e} | {r['cost']:.6f} |"
         )
     by = {(r["case"], r["impl"]): r for r in rows}
-    for case in ("typical", "pooled", "near"):
+    for case in ("typical", "pooled", "near", "expert"):
         ours = by[(case, "ilfo")]["seconds"]
         log_s = by[(case, "pot-sinkhorn_log")]["seconds"]
         ker_s = by[(case, "pot-sinkhorn")]["seconds"]
