@@ -22,7 +22,11 @@ def test_standardizer_follows_the_reference_recipe():
     fitted = Standardizer.from_demos(demos)
     np.testing.assert_allclose(fitted.mean, states.mean(axis=0))
     np.testing.assert_allclose(fitted.scale, 3 * std + 1e-8)
-
+    # A constant whose float64 mean rounds (0.1 x 1000: std ~1e-17, not 0) is constant too:
+    # PWIL's unfloored scale would otherwise blow its column's differences up by 1e17.
+    demos[0][:, 2] = demos[1][:, 2] = 0.1
+    pwil = Standardizer.from_demos(demos, std_factor=1.0, std_floor=0.0, eps=0.0)
+    assert pwil.scale[2] == 1.0
 
 @pytest.mark.parametrize("solver", ["sinkhorn", "emd", "greedy"])
 @pytest.mark.parametrize("atoms", ["transitions", "states"])

@@ -100,12 +100,13 @@ class Standardizer:
         """Fit as the paper's code does: scale = std_factor * max(std, std_floor) + eps.
 
         mean and std (ddof=1) come from the demonstrations with each demo's last state left out;
-        a zero std becomes 1 before the floor. PWIL uses std_factor=1, std_floor=0, eps=0.
+        a zero std (below 1e-8: a constant column whose mean rounded, as the agents' normaliser
+        tests it) becomes 1 before the floor. PWIL uses std_factor=1, std_floor=0, eps=0.
         """
         states = np.concatenate([d[:-1] for d in demos], axis=0)
         mean = states.mean(axis=0)
         std = states.std(axis=0, ddof=1) if len(states) > 1 else np.ones(states.shape[1])
-        std = np.where(std == 0, 1.0, std)
+        std = np.where(np.isclose(std, 0.0), 1.0, std)
         std = np.maximum(std, std_floor)
         return cls(mean=mean, scale=std_factor * std + eps)
 
