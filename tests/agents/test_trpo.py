@@ -399,15 +399,16 @@ def point_mass_batch(agent, state, key, episodes, seed=0):
     return batch, float(batch.reward.sum() / episodes)
 
 
-@pytest.mark.parametrize("code_fisher, closed", [(False, 0.7), (True, 0.25)])
-def test_learns_point_mass(code_fisher, closed):
-    """TRPO with the exact KL Hessian closes most of the gap in 8 iterations; the authors'
-    Fisher (2 I on the mean network too) takes several times shorter steps, so less."""
+@pytest.mark.parametrize("code_fisher, iterations, closed", [(False, 8, 0.7), (True, 12, 0.4)])
+def test_learns_point_mass(code_fisher, iterations, closed):
+    """TRPO with the exact KL Hessian closes most of the gap in 8 iterations (measured 0.85-0.93
+    over seeds 0-2); the authors' Fisher (2 I on the mean network too) takes several times
+    shorter steps: 0.22-0.50 after 8 iterations, 0.53-0.79 after 12."""
     agent = small_agent(batch_steps=N, code_fisher=code_fisher)
     state = agent.init(0)
     _, initial = point_mass_batch(agent, state, None, 64, seed=99)
     key = jax.random.PRNGKey(0)
-    for i in range(8):
+    for i in range(iterations):
         key, k = jax.random.split(key)
         batch, _ = point_mass_batch(agent, state, k, agent.batch_steps // 32, seed=i)
         state, _ = agent.learn(state, batch)
