@@ -28,6 +28,7 @@ def test_standardizer_follows_the_reference_recipe():
     pwil = Standardizer.from_demos(demos, std_factor=1.0, std_floor=0.0, eps=0.0)
     assert pwil.scale[2] == 1.0
 
+
 @pytest.mark.parametrize("solver", ["sinkhorn", "emd", "greedy"])
 @pytest.mark.parametrize("atoms", ["transitions", "states"])
 def test_rewards_sum_to_minus_scale_times_transport_cost(solver, atoms):
