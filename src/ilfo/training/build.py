@@ -54,25 +54,30 @@ class EnvInfo(NamedTuple):
     """Actions lie in [-max_action, max_action] in every dimension."""
 
 
+def make_run_env(
+    config: TrainConfig,
+    fixed_horizon: bool,
+    horizon: int | None = None,
+    render_mode: str | None = None,
+) -> gym.Env:
+    """An environment of the run's task as its config sets it (healthy angle range, contact
+    forces), in fixed-horizon or standard mode; ``horizon`` None: the config's (or the env's
+    own limit)."""
+    return make_env(
+        config.env,
+        fixed_horizon,
+        horizon=config.horizon if horizon is None else horizon,
+        render_mode=render_mode,
+        healthy_angle_range=config.healthy_angle_range,
+        contact_forces=config.contact_forces,
+    )
+
+
 def make_envs(config: TrainConfig) -> tuple[gym.Env, gym.Env, EnvInfo]:
     """The run's training environment (fixed-horizon or standard, as configured), its
     evaluation environment (always fixed-horizon, the paper's score) and their ``EnvInfo``."""
-    angles = config.healthy_angle_range
-    env = make_env(
-        config.env,
-        config.uses_fixed_horizon,
-        horizon=config.horizon,
-        healthy_angle_range=angles,
-        contact_forces=config.contact_forces,
-    )
-    horizon = int(env.spec.max_episode_steps)
-    eval_env = make_env(
-        config.env,
-        True,
-        horizon=horizon,
-        healthy_angle_range=angles,
-        contact_forces=config.contact_forces,
-    )
+    env = make_run_env(config, config.uses_fixed_horizon)
+    eval_env = make_run_env(config, True, horizon=int(env.spec.max_episode_steps))
     return env, eval_env, env_info(env, config.env)
 
 

@@ -205,16 +205,9 @@ class RunPolicy:
     def eval_env(self, render_mode: str | None = None) -> Any:
         """An environment as the run's evaluations used: fixed-horizon episodes of the run's
         horizon, its healthy angle range."""
-        from ilfo.envs import make_env
+        from ilfo.training.build import make_run_env
 
-        return make_env(
-            self.config.env,
-            True,
-            horizon=self.env.horizon,
-            render_mode=render_mode,
-            healthy_angle_range=self.config.healthy_angle_range,
-            contact_forces=self.config.contact_forces,
-        )
+        return make_run_env(self.config, True, horizon=self.env.horizon, render_mode=render_mode)
 
 
 def load_run_policy(run_dir: str | Path, which: str = "final") -> RunPolicy:
@@ -222,7 +215,7 @@ def load_run_policy(run_dir: str | Path, which: str = "final") -> RunPolicy:
     newest checkpoint's), ``best`` (``best_policy.msgpack``, the best-evaluated so far) or
     ``latest`` (the newest checkpoint's). Clear errors for what is missing or damaged."""
     from ilfo.agents import policy_of
-    from ilfo.training.build import env_info, make_agent
+    from ilfo.training.build import env_info, make_agent, make_run_env
     from ilfo.training.checkpoint import load_checkpoint
     from ilfo.training.config import config_from_dict
 
@@ -230,7 +223,8 @@ def load_run_policy(run_dir: str | Path, which: str = "final") -> RunPolicy:
         raise ValueError(f"which must be 'final', 'best' or 'latest', got {which!r}")
     run_dir = Path(run_dir)
     config = config_from_dict(read_run_config(run_dir), run_dir / CONFIG_FILE)
-    env = env_info(_probe_env(config), config.env)
+    # The run's environment, built only to read its spaces and horizon.
+    env = env_info(make_run_env(config, config.uses_fixed_horizon), config.env)
     agent = make_agent(config, env, demos=None)  # a template: its state is read from files
     template = agent.functions.init(config.seed)
     file = {"final": FINAL_POLICY_FILE, "best": BEST_POLICY_FILE}.get(which)
@@ -244,19 +238,6 @@ def load_run_policy(run_dir: str | Path, which: str = "final") -> RunPolicy:
         raise FileNotFoundError(f"{run_dir} has neither {FINAL_POLICY_FILE} nor a checkpoint")
     loaded = load_checkpoint(ckpt, template, buffer_dims=None)
     return RunPolicy(config, env, agent, policy_of(loaded.agent_state), "latest checkpoint", loaded)
-
-
-def _probe_env(config: TrainConfig) -> Any:
-    """The run's environment, built only to read its spaces and horizon."""
-    from ilfo.envs import make_env
-
-    return make_env(
-        config.env,
-        config.uses_fixed_horizon,
-        horizon=config.horizon,
-        healthy_angle_range=config.healthy_angle_range,
-        contact_forces=config.contact_forces,
-    )
 
 
 SNAPSHOT_FILES = (
