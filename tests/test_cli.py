@@ -1,6 +1,9 @@
 import json
+import os
+import signal
 
 import numpy as np
+import pytest
 
 from ilfo.cli import main
 from ilfo.paths import bundled_demos
@@ -31,3 +34,19 @@ def test_reward_errors_are_clear(capsys, tmp_path):
 
 def test_bundled_demos_are_found():
     assert bundled_demos("Hopper-v5-scripted").is_file()
+
+
+def test_stop_signals_interrupt_even_where_sigint_was_ignored():
+    """A sweep started in the background by a script has SIGINT ignored; `kill PID` sends
+    SIGTERM. Both must reach the sweep's checkpoint-and-stop path (KeyboardInterrupt)."""
+    from ilfo.cli._common import stop_signals_interrupt
+
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            with pytest.raises(KeyboardInterrupt), stop_signals_interrupt():
+                os.kill(os.getpid(), sig)
+                signal.sigtimedwait([], 1.0)  # give the handler its moment
+        assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN  # restored on the way out
+    finally:
+        signal.signal(signal.SIGINT, before)

@@ -24,10 +24,17 @@ from ilfo.experiments import (
     record_attempt,
     run_status,
     run_sweep,
+    snapshot_sweep,
 )
 from ilfo.experiments.worker import pin_from_environment, thread_environment
 from ilfo.training import RunLock
-from ilfo.training.run_dir import CHECKPOINT_FILES, FINAL_POLICY_FILE, REPLAY_FILE
+from ilfo.training.run_dir import (
+    CHECKPOINT_FILES,
+    CONFIG_FILE,
+    FINAL_POLICY_FILE,
+    REPLAY_FILE,
+    REPLAY_OMITTED,
+)
 
 TINY = {
     "demos": str(Path(__file__).parents[2] / "data" / "demos" / "Hopper-v5-scripted.npz"),
@@ -156,6 +163,41 @@ def test_run_states_read_off_the_disk(tmp_path):
     assert run_status(sweep, sweep.run(b)).state == "pending"
     record_attempt(sweep, c, "reset")
     assert run_status(sweep, sweep.run(c)).state == "pending"
+
+
+def test_snapshot_keeps_checkpoints_without_buffers_and_continues_as_a_sweep(tmp_path):
+    sweep = create_sweep(tmp_path / "sweep", SweepSpec(seed=(0, 1, 2), config=TINY))
+    done, partial, unstarted = (r.name for r in sweep.runs)
+    _finish(sweep, done)
+    _finish(sweep, partial, step=200)
+    (sweep.run_dir(partial) / FINAL_POLICY_FILE).unlink()  # interrupted at step 200
+    for name in (done, partial):
+        (sweep.run_dir(name) / CONFIG_FILE).write_text(json.dumps(sweep.run(name).config))
+        (sweep.run_dir(name) / "metrics.csv").write_text("step,episode\n100,1\n200,2\n")
+        record_attempt(sweep, name, "start")
+    sweep.log_file(done).write_text("log")
+    (sweep.run_dir(unstarted)).mkdir(parents=True)  # started, killed before a checkpoint
+    lock = RunLock(sweep.run_dir(partial)).acquire()
+    with pytest.raises(ValueError, match="running"):
+        snapshot_sweep(sweep.root, tmp_path / "copy")
+    lock.release()
+    kept = snapshot_sweep(sweep.root, tmp_path / "copy")
+    assert kept == {
+        done: "done",
+        partial: "checkpoint at step 200",
+        unstarted: "left out (no checkpoint)",
+    }
+    copy = open_sweep(tmp_path / "copy")
+    assert copy.runs == sweep.runs
+    assert [s.state for s in copy.statuses()] == ["done", "pending", "pending"]
+    assert copy.statuses()[1].step == 200
+    assert read_attempts(copy, done) == read_attempts(sweep, done)
+    assert copy.log_file(done).read_text() == "log"
+    assert not list((tmp_path / "copy").rglob(REPLAY_FILE))
+    assert (copy.run_dir(partial) / "checkpoints" / "step_200" / REPLAY_OMITTED).is_file()
+    assert not copy.run_dir(unstarted).exists()
+    with pytest.raises(FileExistsError):
+        snapshot_sweep(sweep.root, tmp_path / "copy")
 
 
 class _FakeJob:

@@ -1,4 +1,4 @@
-"""``ilfo sweep run | status``."""
+"""``ilfo sweep run | status | snapshot``, ``ilfo report``, ``ilfo reproduce``."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ilfo.cli._common import stop_signals_interrupt
 from ilfo.config import overrides_from_args
 
 
@@ -60,6 +61,18 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
     status.add_argument("dir", help="a sweep directory")
     status.add_argument("--json", action="store_true", help="one JSON object per run")
     status.set_defaults(run=_run_sweep_status)
+    snapshot = actions.add_parser(
+        "snapshot",
+        help="Copy a stopped sweep without replay buffers (to keep in git or move it).",
+        description="Copy a stopped sweep small enough to keep in git or move between "
+        "machines: its manifest, attempts, logs and each run's newest checkpoint without the "
+        "replay buffer. `ilfo sweep run OUT` continues it: finished runs stay done, "
+        "interrupted ones resume (their buffers refilled by start_steps steps of the current "
+        "policy), runs without a checkpoint start afresh.",
+    )
+    snapshot.add_argument("dir", help="a sweep directory, stopped (Ctrl-C checkpoints its runs)")
+    snapshot.add_argument("out", help="the new directory")
+    snapshot.set_defaults(run=_run_sweep_snapshot)
 
 
 def _train_settings(rest: list[str]) -> dict[str, Any]:
@@ -136,7 +149,8 @@ def _run_sweep(args: argparse.Namespace) -> int:
     print(progress_line(statuses))
     display = _Progress(statuses, enabled=not args.no_progress)
     try:
-        final = run_sweep(sweep, backend, on_change=display.update)
+        with stop_signals_interrupt():
+            final = run_sweep(sweep, backend, on_change=display.update)
     finally:
         display.close()
     print(progress_line(final))
@@ -199,6 +213,17 @@ def _run_sweep_status(args: argparse.Namespace) -> int:
     share = counts["steps_done"] / max(1, counts["steps_total"])
     bar = "#" * round(30 * share)
     print(f"[{bar:<30}] {progress_line(statuses)}")
+    return 0
+
+
+def _run_sweep_snapshot(args: argparse.Namespace) -> int:
+    from ilfo.experiments import snapshot_sweep
+
+    kept = snapshot_sweep(args.dir, args.out)
+    width = max(len(name) for name in kept)
+    for name, what in kept.items():
+        print(f"{name:<{width}}  {what}")
+    print(f"wrote {args.out}; continue it with `ilfo sweep run {args.out}`")
     return 0
 
 
@@ -307,7 +332,8 @@ def _run_reproduce(args: argparse.Namespace) -> int:
     factory = _backend_factory(args)
     display = _Progress([], enabled=not args.no_progress)
     try:
-        _, written = reproduce(args.name, args.budget, root, factory, on_change=display.update)
+        with stop_signals_interrupt():
+            _, written = reproduce(args.name, args.budget, root, factory, on_change=display.update)
     finally:
         display.close()
     print(f"report: {written[0]}")

@@ -15,6 +15,7 @@ from ilfo.experiments.sweep import (
     read_attempts,
     record_attempt,
     run_status,
+    snapshot_sweep,
     summary,
 )
 
@@ -34,5 +35,6 @@ __all__ = [
     "record_attempt",
     "run_status",
     "run_sweep",
+    "snapshot_sweep",
     "summary",
 ]

@@ -308,6 +308,54 @@ def open_sweep(root: str | Path) -> Sweep:
     return Sweep(root, spec, runs)
 
 
+def snapshot_sweep(root: str | Path, out: str | Path) -> dict[str, str]:
+    """A copy of a stopped sweep small enough to keep in git or move between machines: its
+    manifest, attempts and logs, and each run that has a checkpoint as ``snapshot_run`` copies
+    it (no replay buffer). ``ilfo sweep run OUT`` continues it: finished runs stay done,
+    interrupted ones resume from their checkpoint (the buffer refilled by ``start_steps`` steps
+    of the current policy, so not the exact continuation), and runs without a checkpoint start
+    afresh.
+
+    Returns what became of each run: ``done``, ``checkpoint at step N`` or ``left out (no
+    checkpoint)``. Raises FileExistsError where ``out`` exists and ValueError while any run of
+    the sweep is running (stop the sweep first: Ctrl-C checkpoints every run)."""
+    import shutil
+
+    from ilfo.training.run_dir import checkpoint_steps, snapshot_run
+
+    sweep, out = open_sweep(root), Path(out)
+    if out.exists():
+        raise FileExistsError(f"{out} exists: choose a new directory for the snapshot")
+    running = [s.name for s in sweep.statuses() if s.state == "running"]
+    if running:
+        raise ValueError(
+            f"runs of {sweep.root} are running ({', '.join(running)}): stop the sweep first "
+            "(Ctrl-C checkpoints every run)"
+        )
+    tmp = out.with_name(f".{out.name}.tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    shutil.copy2(sweep.root / MANIFEST_FILE, tmp / MANIFEST_FILE)
+    for sub in (ATTEMPTS_DIR, LOGS_DIR):
+        if (sweep.root / sub).is_dir():
+            shutil.copytree(sweep.root / sub, tmp / sub)
+        else:
+            (tmp / sub).mkdir()
+    (tmp / RUNS_DIR).mkdir()
+    kept = {}
+    for status in sweep.statuses():
+        checkpoints = checkpoint_steps(sweep.run_dir(status.name))
+        if not checkpoints:
+            kept[status.name] = "left out (no checkpoint)"
+            continue
+        snapshot_run(sweep.run_dir(status.name), tmp / RUNS_DIR / status.name)
+        kept[status.name] = (
+            "done" if status.state == "done" else f"checkpoint at step {checkpoints[-1][0]}"
+        )
+    tmp.rename(out)
+    return kept
+
+
 # ------------------------------------------------------------------------------ run states
 @dataclass(frozen=True)
 class RunStatus:
