@@ -13,12 +13,10 @@ file in a temporary directory, then labelled with 1 and 2 workers.
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 import sys
 import tempfile
 import time
-from datetime import date
 from pathlib import Path
 
 import h5py
@@ -27,7 +25,7 @@ import numpy as np
 # Keep this folder off the path: bench/ot.py would shadow POT's `ot`.
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 from ilfo import demos
-from ilfo.benchmarking import machine
+from ilfo.benchmarking import print_rows
 from ilfo.experts import expert_dir
 from ilfo.labelling import LabelConfig, label_dataset
 
@@ -97,21 +95,16 @@ def main() -> None:
             out.unlink()
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    if args.json:
-        for row in rows:
-            print(json.dumps({**row, "date": date.today().isoformat(), "machine": machine()}))
-        return
-    print(f"{date.today().isoformat()}, {machine()}")
-    print(
-        "| episodes | transitions | demos | workers | labelling s | with reading and writing s "
-        "| ms per solve and core |"
-    )
-    print("|---|---|---|---|---|---|---|")
-    for r in rows:
-        print(
-            f"| {r['episodes']} | {r['transitions']:,} | {r['num_demos']} | {r['workers']} | "
-            f"{r['label_s']:.1f} | {r['total_s']:.1f} | {r['ms_per_episode_solve']:.1f} |"
-        )
+    columns = {
+        "episodes": "{episodes}",
+        "transitions": "{transitions:,}",
+        "demos": "{num_demos}",
+        "workers": "{workers}",
+        "labelling s": "{label_s:.1f}",
+        "with reading and writing s": "{total_s:.1f}",
+        "ms per solve and core": "{ms_per_episode_solve:.1f}",
+    }
+    print_rows(rows, columns, args.json)
 
 
 if __name__ == "__main__":

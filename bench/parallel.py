@@ -16,16 +16,14 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import shutil
 import sys
 import tempfile
-from datetime import date
 from pathlib import Path
 
 # Keep this folder off the path: bench/ot.py would shadow POT's `ot`.
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
-from ilfo.benchmarking import machine
+from ilfo.benchmarking import print_rows
 from ilfo.experiments import LocalBackend, SweepSpec, create_sweep, read_attempts, run_sweep
 
 START_STEPS = 5000
@@ -91,21 +89,15 @@ def main() -> None:
             rows.append(measure(mode, args.steps, root))
         finally:
             shutil.rmtree(root, ignore_errors=True)
-    if args.json:
-        for row in rows:
-            print(json.dumps({**row, "date": date.today().isoformat(), "machine": machine()}))
-        return
-    print(f"{date.today().isoformat()}, {machine()}")
-    print(
-        "| mode | cores per run | runs at once | training steps/s per run | span s "
-        "| all runs steps/s |"
-    )
-    print("|---|---|---|---|---|---|")
-    for r in rows:
-        print(
-            f"| {r['mode']} | {r['cores_per_run']} | {r['at_once']} | "
-            f"{r['run_steps_per_s']:.0f} | {r['span_s']:.0f} | {r['combined_steps_per_s']:.0f} |"
-        )
+    columns = {
+        "mode": "{mode}",
+        "cores per run": "{cores_per_run}",
+        "runs at once": "{at_once}",
+        "training steps/s per run": "{run_steps_per_s:.0f}",
+        "span s": "{span_s:.0f}",
+        "all runs steps/s": "{combined_steps_per_s:.0f}",
+    }
+    print_rows(rows, columns, args.json)
 
 
 if __name__ == "__main__":

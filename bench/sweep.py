@@ -13,17 +13,15 @@ shut-down).
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 import sys
 import tempfile
 import time
-from datetime import date
 from pathlib import Path
 
 # Keep this folder off the path: bench/ot.py would shadow POT's `ot`.
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
-from ilfo.benchmarking import machine
+from ilfo.benchmarking import print_rows
 from ilfo.experiments import (
     LocalBackend,
     RayBackend,
@@ -87,22 +85,17 @@ def main() -> None:
             rows.append(measure(name, root))
         finally:
             shutil.rmtree(root, ignore_errors=True)
-    if args.json:
-        for row in rows:
-            print(json.dumps({**row, "date": date.today().isoformat(), "machine": machine()}))
-        return
-    print(f"{date.today().isoformat()}, {machine()}")
-    print(
-        "| backend | runs | at once | sweep wall s | backend start s | run s (mean) "
-        "| first start to last end s | overhead s |"
-    )
-    print("|---|---|---|---|---|---|---|---|")
-    for r in rows:
-        print(
-            f"| {r['backend']} | {r['runs']} | {r['slots']} | {r['wall_s']:.1f} | "
-            f"{r['backend_start_s']:.1f} | {r['run_s_mean']:.1f} | {r['runs_span_s']:.1f} | "
-            f"{r['overhead_s']:.1f} |"
-        )
+    columns = {
+        "backend": "{backend}",
+        "runs": "{runs}",
+        "at once": "{slots}",
+        "sweep wall s": "{wall_s:.1f}",
+        "backend start s": "{backend_start_s:.1f}",
+        "run s (mean)": "{run_s_mean:.1f}",
+        "first start to last end s": "{runs_span_s:.1f}",
+        "overhead s": "{overhead_s:.1f}",
+    }
+    print_rows(rows, columns, args.json)
 
 
 if __name__ == "__main__":

@@ -1,9 +1,14 @@
-"""What the bench/ scripts share: a one-line description of the machine they ran on."""
+"""What the bench/ scripts share: a one-line description of the machine they ran on, and how
+they print their rows."""
 
 from __future__ import annotations
 
+import json
 import os
 import platform
+from collections.abc import Mapping, Sequence
+from datetime import date
+from typing import Any
 
 import numpy as np
 
@@ -22,3 +27,21 @@ def machine(**versions: str) -> str:
     extra = "".join(f", {name} {version}" for name, version in versions.items())
     python = platform.python_version()
     return f"{model}, {os.cpu_count()} cores, Python {python}, numpy {np.__version__}{extra}"
+
+
+def print_rows(
+    rows: Sequence[Mapping[str, Any]], columns: Mapping[str, str], as_json: bool
+) -> None:
+    """Print a benchmark's rows: as JSON lines, each with the date and ``machine()``, or as a
+    markdown table under a line naming both. ``columns`` maps each header to a format string
+    of the row's fields (``{"ms per solve": "{ms:.1f}"}``)."""
+    today = date.today().isoformat()
+    if as_json:
+        for row in rows:
+            print(json.dumps({**row, "date": today, "machine": machine()}))
+        return
+    print(f"{today}, {machine()}")
+    print("| " + " | ".join(columns) + " |")
+    print("|" + "---|" * len(columns))
+    for row in rows:
+        print("| " + " | ".join(fmt.format(**row) for fmt in columns.values()) + " |")
