@@ -326,7 +326,8 @@ def snapshot_sweep(root: str | Path, out: str | Path) -> dict[str, str]:
     sweep, out = open_sweep(root), Path(out)
     if out.exists():
         raise FileExistsError(f"{out} exists: choose a new directory for the snapshot")
-    running = [s.name for s in sweep.statuses() if s.state == "running"]
+    statuses = sweep.statuses()
+    running = [s.name for s in statuses if s.state == "running"]
     if running:
         raise ValueError(
             f"runs of {sweep.root} are running ({', '.join(running)}): stop the sweep first "
@@ -334,25 +335,30 @@ def snapshot_sweep(root: str | Path, out: str | Path) -> dict[str, str]:
         )
     tmp = out.with_name(f".{out.name}.tmp")
     shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    shutil.copy2(sweep.root / MANIFEST_FILE, tmp / MANIFEST_FILE)
-    for sub in (ATTEMPTS_DIR, LOGS_DIR):
-        if (sweep.root / sub).is_dir():
-            shutil.copytree(sweep.root / sub, tmp / sub)
-        else:
-            (tmp / sub).mkdir()
-    (tmp / RUNS_DIR).mkdir()
-    kept = {}
-    for status in sweep.statuses():
-        checkpoints = checkpoint_steps(sweep.run_dir(status.name))
-        if not checkpoints:
-            kept[status.name] = "left out (no checkpoint)"
-            continue
-        snapshot_run(sweep.run_dir(status.name), tmp / RUNS_DIR / status.name)
-        kept[status.name] = (
-            "done" if status.state == "done" else f"checkpoint at step {checkpoints[-1][0]}"
-        )
-    tmp.rename(out)
+    try:
+        tmp.mkdir(parents=True)
+        shutil.copy2(sweep.root / MANIFEST_FILE, tmp / MANIFEST_FILE)
+        for sub in (ATTEMPTS_DIR, LOGS_DIR):
+            if (sweep.root / sub).is_dir():
+                shutil.copytree(sweep.root / sub, tmp / sub)
+            else:
+                (tmp / sub).mkdir()
+        (tmp / RUNS_DIR).mkdir()
+        kept = {}
+        for status in statuses:
+            checkpoints = checkpoint_steps(sweep.run_dir(status.name))
+            if not checkpoints:
+                kept[status.name] = "left out (no checkpoint)"
+                continue
+            # Refused (ValueError) if a run was started again since the check above.
+            snapshot_run(sweep.run_dir(status.name), tmp / RUNS_DIR / status.name)
+            kept[status.name] = (
+                "done" if status.state == "done" else f"checkpoint at step {checkpoints[-1][0]}"
+            )
+        tmp.rename(out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)  # no half-written copy left beside ``out``
+        raise
     return kept
 
 
