@@ -161,3 +161,10 @@ def test_firl_defaults_follow_the_authors():
     assert hopper.part_config("firl") == FIRLConfig()
     ant = TrainConfig(env="Ant-v5", algo="firl-fkl").part_config("firl")
     assert ant.reward_hidden == (128, 128) and ant.disc_blocks == 6
+    # The authors' SAC: standard episodes (a fall ends one) after 1000 random steps.
+    assert not hopper.uses_fixed_horizon and hopper.random_steps == 1000
+    assert hopper.resolved(1000).start_steps == 1000  # config.json records the number
+    given = TrainConfig(env="Hopper-v5", algo="firl-fkl", start_steps=50, fixed_horizon=True)
+    assert given.uses_fixed_horizon and given.random_steps == 50
+    oops = TrainConfig(env="Hopper-v5", algo="oops-td3")
+    assert oops.uses_fixed_horizon and oops.random_steps == 10_000  # ilfo's protocol

@@ -113,7 +113,11 @@ class Recipe:
     fixed_horizon: bool | None = None
     """The episodes it trains on when a run does not say (``TrainConfig.fixed_horizon``): None,
     ilfo's protocol (fixed-horizon for imitation, standard for the task reward); False:
-    standard episodes, ending at a fall, where the algo's own code needs them (SIL)."""
+    standard episodes, ending at a fall, where the algo's own code needs them (SIL, f-IRL)."""
+    start_steps: int | None = None
+    """Uniformly random steps before the policy acts when a run does not say
+    (``TrainConfig.start_steps``): None, ilfo's protocol (10,000, the OOPS paper's); a number
+    where the algo's own code differs and needs it (f-IRL)."""
     part_defaults: Callable[[str], dict[str, Any]] | None = None
     """``part_defaults(env_id)`` -> {part name: config}: the recipe's own defaults for its
     parts, where a run gives none (a baseline's authors' settings, which may differ by env),
@@ -349,6 +353,11 @@ RECIPES: tuple[Recipe, ...] = (
         "firl",
         "f-IRL (FKL): a state-only reward network by state-marginal matching + SAC (Ni 2020)",
         part_defaults=_firl_defaults,
+        # The authors' SAC ends episodes at falls, where its entropy bonus makes staying up pay;
+        # with termination ignored, the learned r(s) is too flat beside temperature 0.2 and the
+        # policy stays near random on the floor (docs/benchmarks.md, Hopper).
+        fixed_horizon=False,
+        start_steps=1000,
     ),
     Recipe("td3", "td3", None, "TD3 on the task reward (no demos)"),
     Recipe("sac", "sac", None, "SAC on the task reward (no demos; ilfo's experts)"),

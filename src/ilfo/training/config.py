@@ -21,6 +21,10 @@ from ilfo.rewards import DiscriminatorConfig, FIRLConfig, OOPSConfig, PWILConfig
 from ilfo.rewards.oops_adv import AdversarialOOPSConfig
 from ilfo.rewards.sil import SILConfig
 
+DEFAULT_START_STEPS = 10_000
+"""Uniformly random steps before the policy acts, where neither the run nor its algo says (the
+OOPS paper's code)."""
+
 Algo = Literal[tuple(ALGOS)]  # type: ignore[valid-type]
 """The names of ``ilfo.algos.ALGOS``, made from the registry (the CLI's ``--algo`` choices)."""
 
@@ -41,9 +45,10 @@ class TrainConfig:
     """How many of the file's demos to imitate (the first N)."""
     steps: int = 1_000_000
     """Environment steps in total (random ones included)."""
-    start_steps: int = 10_000
+    start_steps: int | None = None
     """Uniformly random steps before the policy acts (off-policy agents only: TRPO acts from
-    the first step)."""
+    the first step); None: the algo's (``Recipe.start_steps``: firl-fkl 1,000, as its authors'
+    code), else ``DEFAULT_START_STEPS`` (10,000, the paper's)."""
     updates_per_step: int = 1
     """Agent updates per environment step collected (the update-to-data ratio), run after each
     episode; 1 is the paper's. More spends compute to learn more from the same data. Off-policy
@@ -55,7 +60,8 @@ class TrainConfig:
     """Seed of everything: environment, exploration, networks, demo draws."""
     fixed_horizon: bool | None = None
     """Run every episode to the full horizon, ignoring termination (the paper); None: on for
-    imitation (except sil: off, as its authors' code), off for true-reward algos."""
+    imitation (except sil and firl-fkl: off, as their authors' code), off for true-reward
+    algos."""
     horizon: int | None = None
     """Episode length; None: the environment's limit (1,000 for MuJoCo)."""
     healthy_angle_range: tuple[float, float] | None = None
@@ -152,7 +158,7 @@ class TrainConfig:
         for name in counts:
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if self.start_steps < 0:
+        if self.start_steps is not None and self.start_steps < 0:
             raise ValueError(f"start_steps must be >= 0, got {self.start_steps}")
         minutes = self.checkpoint_minutes
         if isinstance(minutes, bool) or not isinstance(minutes, numbers.Real):
@@ -193,6 +199,16 @@ class TrainConfig:
             return self.recipe.fixed_horizon
         return self.imitation
 
+    @property
+    def random_steps(self) -> int:
+        """The resolved ``start_steps``: as given, else the algo's (``Recipe.start_steps``),
+        else ``DEFAULT_START_STEPS``."""
+        if self.start_steps is not None:
+            return self.start_steps
+        if self.recipe.start_steps is not None:
+            return self.recipe.start_steps
+        return DEFAULT_START_STEPS
+
     def part_config(self, part: str) -> Any:
         """The config of part ``part`` (a field name: ``td3``, ``oops``, ...) as given, else its
         default (the recipe's ``part_defaults``, else the ``preset``'s, for an agent); a
@@ -228,7 +244,7 @@ class TrainConfig:
         parts[algo.agent] = self.agent_config(horizon)
         if algo.reward is not None:
             parts[algo.reward] = self.part_config(algo.reward)
-        return dataclasses.replace(self, **parts)
+        return dataclasses.replace(self, start_steps=self.random_steps, **parts)
 
 
 def config_from_dict(raw: dict[str, Any], source: str | Path) -> TrainConfig:

@@ -219,7 +219,7 @@ class Trainer:
         """Collect, reward, store and learn from one episode; evaluate when due."""
         cfg = self.config
         # An on-policy agent collects with its own policy from the start (SIL's code).
-        random_phase = self.step < cfg.start_steps and not self.agent.on_policy
+        random_phase = self.step < cfg.random_steps and not self.agent.on_policy
         refilling = self.step < self.refill_until
         if not random_phase and not bool(self.state.normalizer_set):
             self._fit_normalizer()
@@ -531,10 +531,10 @@ class Trainer:
                     "pending batch there and cannot continue without it; continue the full run "
                     "directory instead"
                 )
-            self.refill_until = ckpt.step + self.config.start_steps
+            self.refill_until = ckpt.step + self.config.random_steps
             warnings.warn(
                 f"{path} has no replay buffer (a snapshot of the run): the buffer is refilled "
-                f"by {self.config.start_steps:,} steps of the current policy before updates "
+                f"by {self.config.random_steps:,} steps of the current policy before updates "
                 "resume; the run continues, but not exactly as the uninterrupted one would",
                 stacklevel=3,
             )
