@@ -10,7 +10,7 @@ that ranks behaviour like the task does has a high rank correlation between the 
     python bench/calibration.py                        # Hopper-v5, table
     python bench/calibration.py --env Hopper-v5 --episodes 5 --json
     python bench/calibration.py --metric euclidean     # one of the paper's cost ablations
-    python bench/calibration.py --env Humanoid-v5 --no-contact-forces  # as the paper's v2 saw it
+    python bench/calibration.py --env Humanoid-v5 --contact-forces  # gymnasium v5 states
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from ilfo.benchmarking import machine
 from ilfo.experiments.calibration import calibrate, spearman
 from ilfo.ot import METRICS
 from ilfo.rewards import OOPSConfig
+from ilfo.training.config import default_contact_forces
 
 NOISE_LEVELS = (0.0, 0.1, 0.2, 0.3, 0.5, 0.8, 1.2)
 
@@ -47,13 +48,16 @@ def main() -> None:
         "--atoms", default="transitions", choices=("transitions", "states"), help="OOPS atoms"
     )
     parser.add_argument(
-        "--no-contact-forces",
-        dest="contact_forces",
-        action="store_false",
-        help="Ant-v5, Humanoid-v5: reward the states without their contact forces",
+        "--contact-forces",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="Ant-v5, Humanoid-v5: reward the states with their contact forces (default: "
+        "without, as ilfo train imitates)",
     )
     parser.add_argument("--json", action="store_true", help="one JSON line per policy")
     args = parser.parse_args()
+    if args.contact_forces is None:
+        args.contact_forces = default_contact_forces(args.env, imitation=True)
 
     stamp = {"date": date.today().isoformat(), "machine": machine(), "metric": args.metric,
              "atoms": args.atoms, "contact_forces": args.contact_forces}  # fmt: skip

@@ -114,12 +114,14 @@ def test_cli_train_and_eval_and_plot(tmp_path, capsys):
     assert out.stat().st_size > 0
 
 
-def test_without_contact_forces_the_run_and_its_demos_drop_them(tmp_path):
+def test_imitation_on_ant_drops_the_contact_forces_by_default_from_the_run_and_its_demos(
+    tmp_path,
+):
     from ilfo.evaluate import evaluate_run
     from ilfo.experiments.distances import final_rollouts
     from ilfo.training import load_demo_set
 
-    ant = {**TINY, "env": "Ant-v5", "demos": None, "num_demos": 1, "contact_forces": False}
+    ant = {**TINY, "env": "Ant-v5", "demos": None, "num_demos": 1}
     run = _train(tmp_path, "ant", **ant, steps=300)
     assert json.loads((run / "config.json").read_text())["contact_forces"] is False
     demos = load_demo_set(TrainConfig(**ant), obs_dim=27)  # the shipped 105-dim demos, sliced
@@ -131,6 +133,27 @@ def test_without_contact_forces_the_run_and_its_demos_drop_them(tmp_path):
     assert evaluate_run(run, episodes=1)["score_mean"] is not None
     with pytest.raises(ValueError, match="have observations of dimension 105"):
         load_demo_set(TrainConfig(**{**ant, "contact_forces": True}), obs_dim=27)
+
+
+def test_contact_forces_default_to_off_for_imitation_on_ant_and_humanoid_only():
+    from ilfo.training import config_from_dict, config_from_settings
+
+    def observes(**kw):
+        return TrainConfig(**kw).observes_contact_forces
+
+    assert not observes(env="Humanoid-v5") and not observes(env="Ant-v5", algo="pwil-td3")
+    assert observes(env="Humanoid-v5", algo="td3") and observes(env="Ant-v5", algo="sac")
+    assert observes(env="Ant-v5", contact_forces=True) and not observes(
+        env="Ant-v5", algo="sac", contact_forces=False
+    )
+    assert observes(env="Hopper-v5") and observes(env="Hopper-v5", contact_forces=True)
+    with pytest.raises(ValueError, match="applies to Ant-v5, Humanoid-v5, not Hopper-v5"):
+        TrainConfig(env="Hopper-v5", contact_forces=False)
+    # config.json records what the run observed, not None.
+    assert TrainConfig(env="Ant-v5").resolved(1000).contact_forces is False
+    # A record written before the setting existed observed them; settings without it default.
+    assert config_from_dict({"env": "Ant-v5"}, "old config.json").contact_forces is True
+    assert config_from_settings({"env": "Ant-v5"}, "spec").observes_contact_forces is False
 
 
 def test_demos_in_which_the_expert_fell_are_named_in_a_warning(tmp_path):

@@ -92,7 +92,10 @@ class ExpertPolicy:
     def rollout(self, seed: int) -> Any:
         """One deterministic fixed-horizon episode (a ``train.Rollout``)."""
         env = make_env(
-            self.config.env, True, horizon=self.horizon, contact_forces=self.config.contact_forces
+            self.config.env,
+            True,
+            horizon=self.horizon,
+            contact_forces=self.config.observes_contact_forces,
         )
         return rollout_policy(env, self.agent, self.policy, self.horizon, seed=seed)
 
@@ -185,7 +188,7 @@ def load_expert(path: str | Path) -> ExpertPolicy:
     except (ValueError, KeyError, TypeError) as err:
         raise ValueError(f"{record_path} is not a readable expert record ({err})") from None
     config = config_from_dict(raw_config, record_path)
-    env = make_env(config.env, True, horizon=horizon, contact_forces=config.contact_forces)
+    env = make_env(config.env, True, horizon=horizon, contact_forces=config.observes_contact_forces)
     agent = make_agent(config, env_info(env, config.env), demos=None)
     template = policy_of(agent.functions.init(config.seed))
     policy = load_msgpack(template, path / POLICY_FILE, "expert policy")
@@ -342,7 +345,10 @@ def evaluate_expert(
     """Mean and std of an expert's fixed-horizon score and standard return."""
     expert = load_expert(path)
     env = make_env(
-        expert.config.env, True, horizon=expert.horizon, contact_forces=expert.config.contact_forces
+        expert.config.env,
+        True,
+        horizon=expert.horizon,
+        contact_forces=expert.config.observes_contact_forces,
     )
     seeds = [first_seed + k for k in range(episodes)]
     scored = score_policy(env, expert.agent, expert.policy, expert.horizon, seeds)

@@ -95,13 +95,30 @@ def _fake_run(root, name, *, env, algo, seed, scores, steps=None, demos=None, nu
     return run
 
 
-def test_runs_without_contact_forces_are_a_cell_of_their_own(tmp_path):
-    run = _fake_run(tmp_path, "h", env="Humanoid-v5", algo="oops-td3", seed=0, scores=[0.5])
-    config = json.loads((run / "config.json").read_text())
-    (run / "config.json").write_text(json.dumps({**config, "contact_forces": False}))
-    _fake_run(tmp_path, "h1", env="Humanoid-v5", algo="oops-td3", seed=1, scores=[0.1])
+def test_runs_that_observed_other_than_the_default_contact_forces_are_a_cell_of_their_own(
+    tmp_path,
+):
+    def run_with(name, algo, seed, **contact_forces):
+        run = _fake_run(tmp_path, name, env="Humanoid-v5", algo=algo, seed=seed, scores=[0.5])
+        config = json.loads((run / "config.json").read_text())
+        (run / "config.json").write_text(json.dumps({**config, **contact_forces}))
+
+    run_with("dropped", "oops-td3", 0, contact_forces=False)  # imitation's default
+    run_with("default", "oops-td3", 1, contact_forces=None)
+    run_with("old", "oops-td3", 2)  # written before the setting: they were observed
+    run_with("observed", "oops-td3", 3, contact_forces=True)
+    run_with("control", "td3", 0)  # the task reward observes them by default
+    run_with("control-dropped", "td3", 1, contact_forces=False)
     runs, _ = collect_runs([tmp_path])
-    assert sorted(str(r.variant) for r in runs) == ["None", "no-contact-forces"]
+    variants = {(r.algo, r.seed): r.variant for r in runs}
+    assert variants == {
+        ("oops-td3", 0): None,
+        ("oops-td3", 1): None,
+        ("oops-td3", 2): "contact-forces",
+        ("oops-td3", 3): "contact-forces",
+        ("td3", 0): None,
+        ("td3", 1): "no-contact-forces",
+    }
 
 
 def test_report_over_a_fixture_against_hand_computations(tmp_path):

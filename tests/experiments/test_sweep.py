@@ -86,7 +86,11 @@ def test_dropping_contact_forces_applies_to_the_envs_that_observe_them():
     spec = dataclasses.replace(spec, config={k: v for k, v in spec.config.items() if k != "demos"})
     runs = {r.config["env"]: r for r in expand(spec)}
     assert runs["Humanoid-v5"].config["contact_forces"] is False
-    assert runs["Hopper-v5"].config["contact_forces"] is True
+    assert runs["Hopper-v5"].config["contact_forces"] is None
+    default = dataclasses.replace(
+        spec, config={k: v for k, v in spec.config.items() if k != "contact_forces"}
+    )
+    assert [r.config["contact_forces"] for r in expand(default)] == [None, None]
 
 
 @pytest.mark.parametrize(

@@ -43,16 +43,18 @@ def calibrate(
     oops: OOPSConfig | None = None,
     expert_directory: str | Path | None = None,
     horizon: int | None = None,
-    contact_forces: bool = True,
+    contact_forces: bool | None = None,
 ) -> list[CalibrationPoint]:
     """Every (policy, episode) of the calibration of ``env_id``'s expert (see the module);
-    ``horizon`` shortens the episodes (None: the expert's). ``contact_forces=False`` (Ant-v5,
-    Humanoid-v5): OOPS rewards the states without their contact forces (the expert still acts
-    on all of them), as ``ilfo train --no-contact-forces`` does."""
+    ``horizon`` shortens the episodes (None: the expert's). ``contact_forces`` (Ant-v5,
+    Humanoid-v5): whether OOPS rewards the states with their contact forces (the expert still
+    acts on all of them); None: as ``ilfo train`` imitates (``default_contact_forces``:
+    without them)."""
     from ilfo import demos
     from ilfo.envs import drop_contact_forces, episode_scores, make_env
     from ilfo.experts import expert_dir, load_expert
     from ilfo.rewards import OOPS
+    from ilfo.training.config import default_contact_forces
 
     directory = Path(expert_directory) if expert_directory else expert_dir(env_id)
     expert = load_expert(directory)
@@ -63,7 +65,9 @@ def calibrate(
     demo = demos.load(directory / "demos.npz").episodes[0].observations
 
     # An expert trained without contact forces observes none: nothing to drop.
-    drop = not contact_forces and expert.config.contact_forces
+    if contact_forces is None:
+        contact_forces = default_contact_forces(env_id, imitation=True)
+    drop = not contact_forces and expert.config.observes_contact_forces
 
     def reward_view(observations: np.ndarray) -> np.ndarray:
         return drop_contact_forces(observations, env_id) if drop else observations
@@ -71,7 +75,10 @@ def calibrate(
     rewarder = OOPS([reward_view(demo)], oops or OOPSConfig())
     steps = horizon or expert.horizon
     env = make_env(
-        env_id, fixed_horizon=True, horizon=steps, contact_forces=expert.config.contact_forces
+        env_id,
+        fixed_horizon=True,
+        horizon=steps,
+        contact_forces=expert.config.observes_contact_forces,
     )
     low, high = env.action_space.low, env.action_space.high
     act_expert = expert.agent.functions.act

@@ -104,7 +104,7 @@ def final_rollouts(
         env.close()
     demo_file = config.demos or default_demos_path(config.env)
     expert_trajectories = demo_trajectories(demo_file, experts)
-    if not config.contact_forces:  # the space the run observed
+    if not config.observes_contact_forces:  # the space the run observed
         expert_trajectories = [
             Trajectory(
                 match_observation_width(t.observations, config.env, loaded.env.obs_dim), t.actions

@@ -111,14 +111,33 @@ def collect_runs(paths: Iterable[str | Path]) -> tuple[list[RunResult], list[str
     return runs, skipped
 
 
+def _contact_forces_variant(config: dict[str, Any]) -> str | None:
+    """ "contact-forces" or "no-contact-forces" for a run that observed Ant's or Humanoid's
+    contact forces otherwise than ``ilfo train``'s default for its algo, else None. A config
+    without the setting predates it, when every run observed them."""
+    from ilfo.algos import ALGOS
+    from ilfo.envs.make import CONTACT_FORCE_DIMS
+    from ilfo.training.config import default_contact_forces
+
+    env, algo = config.get("env"), config.get("algo")
+    if env not in CONTACT_FORCE_DIMS or algo not in ALGOS:
+        return None
+    default = default_contact_forces(env, ALGOS[algo].imitation)
+    observed = config.get("contact_forces", True)
+    observed = default if observed is None else bool(observed)
+    if observed == default:
+        return None
+    return "contact-forces" if observed else "no-contact-forces"
+
+
 def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | None:
     """A run's evaluations (None if it has none with a normalised score yet)."""
     from ilfo.training import read_metrics, read_run_config
 
     run_dir = Path(run_dir)
     config = read_run_config(run_dir)
-    if variant is None and config.get("contact_forces", True) is False:
-        variant = "no-contact-forces"  # not the cell of runs that observed them
+    if variant is None:  # runs that observed otherwise than the default are not its cell
+        variant = _contact_forces_variant(config)
     if not (run_dir / "metrics.csv").is_file():  # a sweep's run before its first episode
         return None
     rows = [r for r in read_metrics(run_dir) if r.get(SCORE)]

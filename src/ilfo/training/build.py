@@ -69,7 +69,7 @@ def make_run_env(
         horizon=config.horizon if horizon is None else horizon,
         render_mode=render_mode,
         healthy_angle_range=config.healthy_angle_range,
-        contact_forces=config.contact_forces,
+        contact_forces=config.observes_contact_forces,
     )
 
 
@@ -113,7 +113,7 @@ def load_demo_set(config: TrainConfig, obs_dim: int) -> DemoSet:
         return DemoSet([], math.nan, None)
     episodes = load_demos(config)
     observations = [e.observations for e in episodes]
-    if not config.contact_forces:  # demos of the full observation: the states without them
+    if not config.observes_contact_forces:  # demos of the full observation: the states without them
         observations = [match_observation_width(o, config.env, obs_dim) for o in observations]
     if observations[0].shape[1] != obs_dim:
         raise ValueError(

@@ -69,11 +69,13 @@ class TrainConfig:
     run's training and evaluation episodes; None: the env's own ((-0.2, 0.2) for Hopper).
     Stricter ranges train experts with a margin from a fall; demos and the paper's scores always
     use the env's own range."""
-    contact_forces: bool = True
-    """Ant-v5 and Humanoid-v5: observe the bodies' contact forces (gymnasium's default). False
-    drops them from the learner's observations and from the demos' (the paper's v2 tasks had
-    them all zero); on Humanoid they are 98% of OOPS's distance once the learner has fallen
-    (docs/benchmarks.md, issue 26)."""
+    contact_forces: bool | None = None
+    """Ant-v5 and Humanoid-v5: observe the bodies' contact forces (gymnasium's v5 observations
+    end with them). False drops them from the learner's observations and from the demos'. None:
+    off for imitation, as the paper's v2 tasks saw them (all zero: mujoco-py >= 2.0 left them
+    unfilled; on Humanoid they are 98% of OOPS's distance once the learner has fallen,
+    docs/benchmarks.md), on for the task reward (``ilfo expert train``'s experts observe them).
+    Other envs have none to drop."""
     eval_every: int = 5_000
     """Evaluate every this many environment steps."""
     eval_episodes: int = 10
@@ -174,7 +176,7 @@ class TrainConfig:
                     f"got {self.healthy_angle_range}"
                 )
             object.__setattr__(self, "healthy_angle_range", angles)
-        if not self.contact_forces and self.env not in CONTACT_FORCE_DIMS:
+        if self.contact_forces is False and self.env not in CONTACT_FORCE_DIMS:
             raise ValueError(
                 f"--no-contact-forces applies to {', '.join(CONTACT_FORCE_DIMS)}, not {self.env}"
             )
@@ -198,6 +200,13 @@ class TrainConfig:
         if self.recipe.fixed_horizon is not None:
             return self.recipe.fixed_horizon
         return self.imitation
+
+    @property
+    def observes_contact_forces(self) -> bool:
+        """The resolved ``contact_forces``: as given, else ``default_contact_forces``."""
+        if self.contact_forces is not None:
+            return self.contact_forces
+        return default_contact_forces(self.env, self.imitation)
 
     @property
     def random_steps(self) -> int:
@@ -244,12 +253,31 @@ class TrainConfig:
         parts[algo.agent] = self.agent_config(horizon)
         if algo.reward is not None:
             parts[algo.reward] = self.part_config(algo.reward)
-        return dataclasses.replace(self, start_steps=self.random_steps, **parts)
+        return dataclasses.replace(
+            self,
+            start_steps=self.random_steps,
+            contact_forces=self.observes_contact_forces,
+            **parts,
+        )
+
+
+def default_contact_forces(env: str, imitation: bool) -> bool:
+    """Whether a run on ``env`` observes the contact forces when its config leaves
+    ``contact_forces`` None: not on Ant-v5 and Humanoid-v5 for ``imitation`` (the paper's v2
+    tasks had them all zero), else yes (the task reward, and envs without them)."""
+    return env not in CONTACT_FORCE_DIMS or not imitation
 
 
 def config_from_dict(raw: dict[str, Any], source: str | Path) -> TrainConfig:
-    """A ``TrainConfig`` from a dict read from a file (config.json, expert.json); a ValueError
-    names ``source`` and the setting at fault (an unknown key, a value of the wrong type)."""
+    """A ``TrainConfig`` from a record ilfo wrote (config.json, expert.json, a sweep's
+    manifest); a ValueError names ``source`` and the setting at fault (an unknown key, a value
+    of the wrong type). A record without ``contact_forces`` predates the setting, when every
+    run observed them: it reads back as True."""
+    return _checked_config({"contact_forces": True, **raw}, source)
+
+
+def _checked_config(raw: Mapping[str, Any], source: str | Path) -> TrainConfig:
+    """``TrainConfig(**raw)``, its errors naming ``source``."""
     known = {f.name for f in dataclasses.fields(TrainConfig)}
     unknown = sorted(set(raw) - known)
     if unknown:
@@ -270,7 +298,7 @@ def config_from_settings(settings: Mapping[str, Any], source: str | Path) -> Tra
     flags do; a whole part (a run's own config.json) reads back unchanged. A ValueError names
     ``source`` and the setting at fault."""
     parts = {k: v for k, v in settings.items() if k in PART_CONFIGS and isinstance(v, Mapping)}
-    config = config_from_dict({k: v for k, v in settings.items() if k not in parts}, source)
+    config = _checked_config({k: v for k, v in settings.items() if k not in parts}, source)
     changed = {}
     for name, given in parts.items():
         known = {f.name for f in dataclasses.fields(PART_CONFIGS[name])}
