@@ -75,6 +75,7 @@ def main() -> None:
         "algo": args.algo,
         "preset": args.preset,
         "updates_per_step": args.updates_per_step,
+        "contact_forces": config.observes_contact_forces,
     }
     curves = {}
     for seed, run_dir in zip(args.seeds, run_dirs, strict=True):

@@ -206,3 +206,28 @@ def test_config_from_settings_file_and_flags(tmp_path):
         config_from_args(str(bad), {}, {})
     with pytest.raises(FileNotFoundError):
         config_from_args(str(tmp_path / "missing.json"), {}, {})
+
+
+def test_a_run_configs_contact_forces_follow_its_env_and_algo_under_other_flags(tmp_path):
+    """config.json records what its env and algo observed; --config FILE with another env or
+    algo takes the new pair's default, unless a flag (or a hand-written file) says."""
+    from ilfo.cli.train import config_from_args, settings_from_args
+    from ilfo.training import TrainConfig
+
+    record = tmp_path / "config.json"
+    humanoid = TrainConfig(env="Humanoid-v5").resolved(horizon=1000)
+    # Without its OOPS part, which would not apply to the task-reward algo below.
+    record.write_text(json.dumps(dataclasses.asdict(dataclasses.replace(humanoid, oops=None))))
+    assert humanoid.contact_forces is False
+    assert TrainConfig().resolved(horizon=1000).contact_forces is None  # Hopper: nothing to drop
+    assert config_from_args(str(record), {"seed": 3}, {}).contact_forces is False
+    assert config_from_args(str(record), {"algo": "td3"}, {}).observes_contact_forces
+    control = config_from_args(str(record), {"algo": "td3", "contact_forces": False}, {})
+    assert not control.observes_contact_forces
+    hopper = config_from_args(str(record), {"env": "Hopper-v5"}, {})  # no error: the default
+    assert hopper.env == "Hopper-v5" and hopper.contact_forces is None
+    # A sweep's axes replace the file's env and algo: its choice goes with them.
+    assert "contact_forces" not in settings_from_args(str(record), {}, {}, ("env", "algo"))
+    subset = tmp_path / "subset.json"
+    subset.write_text(json.dumps({"contact_forces": True}))
+    assert config_from_args(str(subset), {"env": "Ant-v5"}, {}).observes_contact_forces

@@ -12,7 +12,7 @@ from scipy import stats as scipy_stats
 
 from ilfo.experiments import stats
 from ilfo.experiments.paper import paper_ablation, paper_cells, paper_score
-from ilfo.experiments.report import build_report, collect_runs, write_report
+from ilfo.experiments.report import build_report, collect_runs, read_run, write_report
 
 
 def test_iqm_against_hand_and_scipy():
@@ -111,6 +111,7 @@ def test_runs_that_observed_other_than_the_default_contact_forces_are_a_cell_of_
     run_with("control-dropped", "td3", 1, contact_forces=False)
     runs, _ = collect_runs([tmp_path])
     variants = {(r.algo, r.seed): r.variant for r in runs}
+    assert read_run(tmp_path / "old", "w_greedy").variant == "w_greedy+contact-forces"
     assert variants == {
         ("oops-td3", 0): None,
         ("oops-td3", 1): None,

@@ -87,6 +87,8 @@ def test_dropping_contact_forces_applies_to_the_envs_that_observe_them():
     runs = {r.config["env"]: r for r in expand(spec)}
     assert runs["Humanoid-v5"].config["contact_forces"] is False
     assert runs["Hopper-v5"].config["contact_forces"] is None
+    unset = dataclasses.replace(spec, env=("Hopper-v5",), config={**TINY, "contact_forces": None})
+    assert [r.config["contact_forces"] for r in expand(unset)] == [None]  # None is no setting
     default = dataclasses.replace(
         spec, config={k: v for k, v in spec.config.items() if k != "contact_forces"}
     )

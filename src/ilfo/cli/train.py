@@ -79,13 +79,21 @@ def settings_from_args(
 ) -> dict[str, Any]:
     """Settings (``config_from_settings``'s input) from the settings of ``config_file`` (if
     any; its keys in ``drop`` left out, and its parts that are None), changed by the flags
-    given (``overrides``: TrainConfig fields; ``groups``: single fields of a part, by name)."""
+    given (``overrides``: TrainConfig fields; ``groups``: single fields of a part, by name).
+    A run's config.json records the contact forces its env and algo observed: where the flags
+    change (or ``drop`` leaves out) the file's env or algo, that choice is left out too (the new
+    pair's default) unless a flag sets it."""
     from ilfo.algos import PART_CONFIGS
     from ilfo.files import read_settings_file
 
     settings: dict[str, Any] = {}
     if config_file is not None:
         settings = read_settings_file(config_file)
+        if any(
+            k in settings and (k in drop or (k in overrides and overrides[k] != settings[k]))
+            for k in ("env", "algo")
+        ):
+            drop = (*drop, "contact_forces")
         settings = {
             k: v
             for k, v in settings.items()

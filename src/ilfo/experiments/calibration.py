@@ -157,7 +157,9 @@ def write_calibration(results: dict[str, list[CalibrationPoint]], out: Path) -> 
         "",
         "The expert with Gaussian action noise N(0, l^2), zero and random actions; "
         "fixed-horizon episodes; OOPS against the expert's first demo. Spearman's rank "
-        "correlation over all episodes (the paper: strong correlation in every environment).",
+        "correlation over all episodes (the paper: strong correlation in every environment). "
+        "Ant-v5 and Humanoid-v5: OOPS scores the states without their contact forces, as "
+        "imitation observes them by default (the expert acts on all of them).",
         "",
     ]
     for env, points in results.items():

@@ -7,8 +7,9 @@ simplex, uniform weights) between their atoms; the table's number is the mean ov
 trajectories"). The ground cost is the Euclidean distance between raw (not standardised) atoms:
 the paper does not state it; raw Euclidean atoms put its Table 3 values in the range the paper
 prints (Hopper ~3-6, Humanoid ~40). Comparable in kind, not to the digit: ilfo's v5
-observations differ from the paper's v2 ones (Humanoid: 348 dimensions against 376), and so do
-the experts.
+observations differ from the paper's v2 ones (Humanoid: 270 dimensions without the contact
+forces, as imitation runs observe it by default, against 376 with them all zero), and so do the
+experts. A run is compared in the space it observed (the demos sliced to match).
 """
 
 from __future__ import annotations

@@ -136,8 +136,9 @@ def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | Non
 
     run_dir = Path(run_dir)
     config = read_run_config(run_dir)
-    if variant is None:  # runs that observed otherwise than the default are not its cell
-        variant = _contact_forces_variant(config)
+    # Runs that observed otherwise than the default are not its cell (nor a sweep variant's).
+    labels = (variant, _contact_forces_variant(config))
+    variant = "+".join(label for label in labels if label) or None
     if not (run_dir / "metrics.csv").is_file():  # a sweep's run before its first episode
         return None
     rows = [r for r in read_metrics(run_dir) if r.get(SCORE)]

@@ -201,8 +201,9 @@ def expand(spec: SweepSpec) -> list[SweepRun]:
                         settings.update(env=env, algo=algo, num_demos=num_demos, seed=seed)
                         config = config_from_settings(settings, f"sweep run {name}")
                         runs.append(SweepRun(name, _config_record(config), variant))
-    sets_contact_forces = "contact_forces" in spec.config or any(
-        "contact_forces" in change for _, change in variants
+    sets_contact_forces = any(
+        settings.get("contact_forces") is not None
+        for settings in (spec.config, *(change for _, change in variants))
     )
     if sets_contact_forces and not set(spec.env) & set(CONTACT_FORCE_DIMS):
         raise ValueError(

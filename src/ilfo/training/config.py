@@ -256,7 +256,11 @@ class TrainConfig:
         return dataclasses.replace(
             self,
             start_steps=self.random_steps,
-            contact_forces=self.observes_contact_forces,
+            # Recorded where the env has contact forces, so that a later default cannot change
+            # what a resumed run observes; None elsewhere, where there is nothing to choose.
+            contact_forces=self.observes_contact_forces
+            if self.env in CONTACT_FORCE_DIMS
+            else self.contact_forces,
             **parts,
         )
 
