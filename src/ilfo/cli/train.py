@@ -46,7 +46,8 @@ def _add_train_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="start from the settings of this file (a run's config.json, or a hand-written "
         'subset: a part\'s dict, e.g. {"td3": {"batch_size": 256}}, changes single fields '
-        "of its default); flags override it",
+        "of its default); flags override it (a run's recorded contact forces give way to "
+        "the default of another --env or --algo)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     paper, fast = TD3Config.paper(), TD3Config.fast()
