@@ -32,6 +32,31 @@ def test_reward_errors_are_clear(capsys, tmp_path):
     assert "out of range" in capsys.readouterr().err
 
 
+def test_reward_scores_ant_demos_without_contact_forces_by_default(capsys, tmp_path):
+    """As `ilfo train` imitates Ant-v5: the 78 contact-force columns that end its observations
+    are left out unless asked for, so two episodes that differ only there are at distance 0."""
+    from ilfo import demos
+    from ilfo.envs import CONTACT_FORCE_DIMS
+
+    rng = np.random.default_rng(0)
+    body = rng.normal(size=(21, 27))
+    forces = np.zeros((21, CONTACT_FORCE_DIMS["Ant-v5"]))
+    expert = demos.Episode(np.hstack([body, forces]))
+    learner = demos.Episode(np.hstack([body, forces + 5.0]))
+    path = tmp_path / "ant.npz"
+    demos.save(path, [expert, learner], "Ant-v5")
+
+    distances = {}
+    for flag in ([], ["--no-contact-forces"], ["--contact-forces"]):
+        assert main(["reward", "--json", "--demos", str(path), "--learners", "1", *flag]) == 0
+        distances[tuple(flag)] = json.loads(capsys.readouterr().out)["ot_distance"]
+    assert distances[()] == distances[("--no-contact-forces",)] < 1e-3
+    assert distances[("--contact-forces",)] > 1.0
+
+    assert main(["reward", "--no-contact-forces"]) == 2  # Hopper has none
+    assert "applies to" in capsys.readouterr().err
+
+
 def test_bundled_demos_are_found():
     assert bundled_demos("Hopper-v5-scripted").is_file()
 

@@ -11,8 +11,10 @@ from pathlib import Path
 import numpy as np
 
 from ilfo import demos
+from ilfo.envs import CONTACT_FORCE_DIMS, drop_contact_forces
 from ilfo.paths import bundled_demos
 from ilfo.rewards import OOPS, PWIL, OOPSConfig
+from ilfo.training.config import default_contact_forces
 
 
 def _add_reward_parser(sub: argparse._SubParsersAction) -> None:
@@ -59,6 +61,15 @@ def _add_reward_parser(sub: argparse._SubParsersAction) -> None:
         default=docs["reg"][0],
         help=f"Sinkhorn lambda (default {docs['reg'][0]})",
     )
+    p.add_argument(
+        "--contact-forces",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help=(
+            "Ant-v5 and Humanoid-v5 demos: score the states with (or without) the contact "
+            "forces that end their observations (default: as `ilfo train` imitates, without)"
+        ),
+    )
     p.add_argument("--json", action="store_true", help="one JSON line per episode")
     p.set_defaults(run=_run_reward)
 
@@ -67,6 +78,9 @@ def _run_reward(args: argparse.Namespace) -> int:
     path = args.demos or bundled_demos("Hopper-v5-scripted")
     data = demos.load(path)
     episodes = [e.observations for e in data.episodes]
+    dropped = _drops_contact_forces(data.env_id, args.contact_forces)
+    if dropped:
+        episodes = [drop_contact_forces(obs, data.env_id) for obs in episodes]
     if not 0 <= args.expert < len(episodes):
         raise ValueError(f"--expert {args.expert} out of range: the file has {len(episodes)}")
     expert = episodes[args.expert]
@@ -89,7 +103,8 @@ def _run_reward(args: argparse.Namespace) -> int:
         cfg = OOPSConfig(solver=args.solver, metric=args.metric, atoms=args.atoms, reg=args.reg)
         rewarder = OOPS([expert], cfg)
     if not args.json:
-        print(f"{data.env_id} demos from {path}: expert = episode {args.expert}")
+        space = " (states without the contact forces)" if dropped else ""
+        print(f"{data.env_id} demos from {path}: expert = episode {args.expert}{space}")
         print(
             f"{'learner':30s} {'OT distance':>12s} {'mean reward':>12s} "
             f"{'iters':>6s} {'conv':>5s} {'ms':>8s}"
@@ -115,6 +130,21 @@ def _run_reward(args: argparse.Namespace) -> int:
                 f"{out.coupling.iterations!s:>6s} {out.coupling.converged!s:>5s} {ms:8.1f}"
             )
     return 0
+
+
+def _drops_contact_forces(env_id: str, contact_forces: bool | None) -> bool:
+    """Whether ``ilfo reward`` scores ``env_id``'s demos without their contact forces:
+    ``contact_forces`` False, or None on an env whose imitation drops them by default."""
+    if env_id not in CONTACT_FORCE_DIMS:
+        if contact_forces is False:
+            raise ValueError(
+                f"--no-contact-forces applies to {', '.join(CONTACT_FORCE_DIMS)} demos, "
+                f"not {env_id}'s"
+            )
+        return False
+    if contact_forces is None:
+        contact_forces = default_contact_forces(env_id, imitation=True)
+    return not contact_forces
 
 
 def _add_demos_parser(sub: argparse._SubParsersAction) -> None:
