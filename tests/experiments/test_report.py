@@ -12,7 +12,13 @@ from scipy import stats as scipy_stats
 
 from ilfo.experiments import stats
 from ilfo.experiments.paper import paper_ablation, paper_cells, paper_score
-from ilfo.experiments.report import build_report, collect_runs, read_run, write_report
+from ilfo.experiments.report import (
+    build_report,
+    collect_runs,
+    imitates_shipped_demos,
+    read_run,
+    write_report,
+)
 
 
 def test_iqm_against_hand_and_scipy():
@@ -93,6 +99,17 @@ def _fake_run(root, name, *, env, algo, seed, scores, steps=None, demos=None, nu
             writer.writerow([1000 * (k + 1) - 500, 2 * k + 1, "", ""])  # an episode row
             writer.writerow([1000 * (k + 1), 2 * k + 2, score, score / 2])
     return run
+
+
+def test_a_path_to_the_shipped_demos_is_the_shipped_demos():
+    """`--demos data/experts/ENV/demos.npz` imitates what the default does, so its cell is set
+    beside the paper's; another env's file, or another file, is not."""
+    assert imitates_shipped_demos(None, "Walker2d-v5")
+    assert imitates_shipped_demos("data/experts/Walker2d-v5/demos.npz", "Walker2d-v5")
+    assert imitates_shipped_demos("/home/u/ilfo/data/experts/Walker2d-v5/demos.npz", "Walker2d-v5")
+    assert not imitates_shipped_demos("data/experts/Hopper-v5/demos.npz", "Walker2d-v5")
+    assert not imitates_shipped_demos("mine/Walker2d-v5/demos.npz", "Walker2d-v5")
+    assert not imitates_shipped_demos("data/demos/Hopper-v5-scripted.npz", "Hopper-v5")
 
 
 def test_runs_that_observed_other_than_the_default_contact_forces_are_a_cell_of_their_own(

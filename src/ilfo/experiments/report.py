@@ -155,8 +155,19 @@ def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | Non
         curve_steps=np.array([int(r["step"]) for r in rows]),
         curve_scores=np.array([float(r[SCORE]) for r in rows]),
         final_return=float(rows[-1][RETURN]) if rows[-1].get(RETURN) else math.nan,
-        shipped_demos=config.get("demos") is None,
+        shipped_demos=imitates_shipped_demos(config.get("demos"), str(config["env"])),
     )
+
+
+def imitates_shipped_demos(demos: str | None, env: str) -> bool:
+    """Whether a run's ``demos`` setting is the env's shipped expert demos: None (the default)
+    or a path to them as this repository lays them out (``.../data/experts/<env>/demos.npz``,
+    relative or absolute, e.g. ``--demos data/experts/Walker2d-v5/demos.npz``)."""
+    from ilfo.training.build import default_demos_path
+
+    if demos is None:
+        return True
+    return Path(demos).parts[-4:] == default_demos_path(env).parts[-4:]
 
 
 CellKey = tuple[str, str, int, "str | None"]
