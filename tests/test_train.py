@@ -172,6 +172,44 @@ def test_demos_in_which_the_expert_fell_are_named_in_a_warning(tmp_path):
         load_demos(TrainConfig(**{**TINY, "demos": str(path), "num_demos": 3}))
 
 
+def test_a_run_records_the_demo_file_it_imitates_and_warns_if_it_changes(tmp_path):
+    """demos.json ties a run to its demo file's bytes: a resume on a file replaced since (an
+    expert re-exported) warns and keeps the first record; a run older than the record gets one
+    from the step it resumed at."""
+    import hashlib
+    import shutil
+
+    from ilfo import demos
+
+    path = tmp_path / "d.npz"
+    shutil.copy(DEMOS, path)
+    run = _train(tmp_path, "run", demos=str(path), num_demos=2, steps=200)
+    record = json.loads((run / "demos.json").read_text())
+    first_sha = hashlib.sha256(path.read_bytes()).hexdigest()
+    assert record["sha256"] == first_sha and record["path"] == str(path.resolve())
+    episodes = demos.load(path).episodes
+    assert record["num_demos"] == 2 and record["since_step"] == 0
+    assert record["mean_return"] == pytest.approx(np.mean([e.task_score for e in episodes[:2]]))
+
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the same file: no warning
+        Trainer.resume(run, progress=False, steps=300)._lock.release()
+    demos.save(path, episodes[::-1], "Hopper-v5")  # the file replaced
+    with pytest.warns(UserWarning, match="not the demo file this run started on"):
+        Trainer.resume(run, progress=False, steps=300)._lock.release()
+    assert json.loads((run / "demos.json").read_text())["sha256"] == first_sha
+
+    (run / "demos.json").unlink()  # a run from before the record
+    Trainer.resume(run, progress=False, steps=300)._lock.release()
+    record = json.loads((run / "demos.json").read_text())
+    assert record["since_step"] == 200 and record["sha256"] != first_sha
+
+    task_reward = _train(tmp_path, "td3", algo="td3", steps=200)
+    assert not (task_reward / "demos.json").exists()
+
+
 def test_cli_shows_a_warning_as_one_line(tmp_path, capsys):
     from ilfo import demos
 

@@ -112,6 +112,24 @@ def test_a_path_to_the_shipped_demos_is_the_shipped_demos():
     assert not imitates_shipped_demos("data/demos/Hopper-v5-scripted.npz", "Hopper-v5")
 
 
+def test_a_run_that_imitated_an_expert_replaced_since_is_not_set_beside_the_paper(tmp_path):
+    """Its demos.json names the file's sha256 as the run read it; the shipped file has other
+    bytes once the expert is re-exported, and the run's cell is then "other demos"."""
+    import hashlib
+
+    from ilfo.training.build import default_demos_path
+
+    shipped = hashlib.sha256(default_demos_path("Hopper-v5").read_bytes()).hexdigest()
+    for name, sha in (("now", shipped), ("before", "0" * 64)):
+        run = _fake_run(tmp_path / name, "r", env="Hopper-v5", algo="oops-td3", seed=0,
+                        scores=[0.5, 0.97])  # fmt: skip
+        (run / "demos.json").write_text(json.dumps({"sha256": sha}))
+    now = build_report(collect_runs([tmp_path / "now"])[0], resamples=100)
+    assert now.cell("Hopper-v5", "oops-td3", 1).versus_paper == "within"
+    before = build_report(collect_runs([tmp_path / "before"])[0], resamples=100)
+    assert before.cell("Hopper-v5", "oops-td3", 1).versus_paper == "other demos"
+
+
 def test_runs_that_observed_other_than_the_default_contact_forces_are_a_cell_of_their_own(
     tmp_path,
 ):

@@ -15,6 +15,7 @@ paper does not say which it uses.
 from __future__ import annotations
 
 import csv
+import functools
 import math
 import warnings
 from collections.abc import Iterable, Sequence
@@ -133,9 +134,15 @@ def _contact_forces_variant(config: dict[str, Any]) -> str | None:
 def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | None:
     """A run's evaluations (None if it has none with a normalised score yet)."""
     from ilfo.training import read_metrics, read_run_config
+    from ilfo.training.run_dir import read_demos_record
 
     run_dir = Path(run_dir)
     config = read_run_config(run_dir)
+    env = str(config["env"])
+    record = read_demos_record(run_dir)
+    shipped = imitates_shipped_demos(config.get("demos"), env) and _same_file_as_shipped(
+        record, env
+    )
     # Runs that observed otherwise than the default are not its cell (nor a sweep variant's).
     labels = (variant, _contact_forces_variant(config))
     variant = "+".join(label for label in labels if label) or None
@@ -155,8 +162,26 @@ def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | Non
         curve_steps=np.array([int(r["step"]) for r in rows]),
         curve_scores=np.array([float(r[SCORE]) for r in rows]),
         final_return=float(rows[-1][RETURN]) if rows[-1].get(RETURN) else math.nan,
-        shipped_demos=imitates_shipped_demos(config.get("demos"), str(config["env"])),
+        shipped_demos=shipped,
     )
+
+
+def _same_file_as_shipped(record: dict[str, Any] | None, env: str) -> bool:
+    """Whether a run's ``demos.json`` names the demo file that ``env`` ships now, not one of an
+    expert re-exported since; True where that cannot be told (a run older than the record,
+    no shipped file here to compare with)."""
+    if record is None:
+        return True
+    shipped = _shipped_demos_sha256(env)
+    return shipped is None or record.get("sha256") == shipped
+
+
+@functools.cache
+def _shipped_demos_sha256(env: str) -> str | None:
+    from ilfo.training.build import default_demos_path, file_sha256
+
+    path = default_demos_path(env)
+    return file_sha256(path) if path.is_file() else None
 
 
 def imitates_shipped_demos(demos: str | None, env: str) -> bool:

@@ -1,7 +1,9 @@
 """Training runs: a ``TrainConfig`` in, a run directory out.
 
 A run directory (``ilfo train`` writes ``runs/<env>__<algo>__<seed>__<time>/``) holds
-``config.json`` (every setting as the run used it), ``metrics.csv`` and ``tb/`` (TensorBoard),
+``config.json`` (every setting as the run used it), ``demos.json`` (an imitation run's demo
+file, its sha256 and the demos' mean return: ``build.DemoSource``), ``metrics.csv`` and ``tb/``
+(TensorBoard),
 ``checkpoints/`` (``checkpoint``), ``policy.msgpack`` (the final policy), ``best_policy.msgpack``
 and ``best_policy.json`` (the best-evaluated policy, its step and scores) and
 ``learning_curve.png``.
@@ -16,6 +18,7 @@ reader of its policy), ``plots``.
 from ilfo.training.build import (
     Agent,
     DemoSet,
+    DemoSource,
     EnvInfo,
     default_demos_path,
     env_info,
@@ -63,6 +66,7 @@ __all__ = [
     "Algo",
     "Checkpoint",
     "DemoSet",
+    "DemoSource",
     "EnvInfo",
     "LoopHooks",
     "PolicyScores",

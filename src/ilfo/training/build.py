@@ -6,10 +6,12 @@ of algorithms.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import time
 import warnings
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
@@ -95,6 +97,42 @@ def env_info(env: gym.Env, env_id: str) -> EnvInfo:
     )
 
 
+@dataclass(frozen=True)
+class DemoSource:
+    """Which demonstrations a run imitates: what its ``demos.json`` records, so that a run
+    stays tied to the file it imitated when that file is replaced (a re-exported expert)."""
+
+    path: str
+    """The demo file, absolute."""
+    sha256: str
+    """Of the file's bytes."""
+    num_demos: int
+    """Its first ``num_demos`` episodes are imitated."""
+    mean_return: float
+    """Their mean task score: what the run's normalised scores divide by (NaN: not recorded)."""
+
+    def as_record(self, since_step: int) -> dict[str, object]:
+        """The ``demos.json`` record; ``since_step``: the step from which the run is known to
+        have imitated this file (0, or the step of a resume that found no record)."""
+        mean = None if math.isnan(self.mean_return) else self.mean_return
+        return {
+            "path": self.path,
+            "sha256": self.sha256,
+            "num_demos": self.num_demos,
+            "mean_return": mean,
+            "since_step": since_step,
+        }
+
+
+def file_sha256(path: str | Path) -> str:
+    """The sha256 of a file's bytes, hex."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
 class DemoSet(NamedTuple):
     """The demonstrations a run imitates."""
 
@@ -105,12 +143,14 @@ class DemoSet(NamedTuple):
     distance_probe: OOPS | None
     """OOPS against the first demo with the paper's defaults: the OT distance that evaluations
     log (None without demos)."""
+    source: DemoSource | None
+    """The file they come from (None without demos)."""
 
 
 def load_demo_set(config: TrainConfig, obs_dim: int) -> DemoSet:
     """The run's demos (none for task-reward algos), checked against the env's ``obs_dim``."""
     if not config.imitation:
-        return DemoSet([], math.nan, None)
+        return DemoSet([], math.nan, None, None)
     episodes = load_demos(config)
     observations = [e.observations for e in episodes]
     if not config.observes_contact_forces:  # demos of the full observation: the states without them
@@ -122,7 +162,9 @@ def load_demo_set(config: TrainConfig, obs_dim: int) -> DemoSet:
         )
     returns = [e.task_score for e in episodes if e.task_score is not None]
     mean = float(np.mean(returns)) if returns else math.nan
-    return DemoSet(observations, mean, OOPS(observations[:1]))
+    path = demos_path(config)
+    source = DemoSource(str(path.resolve()), file_sha256(path), len(episodes), mean)
+    return DemoSet(observations, mean, OOPS(observations[:1]), source)
 
 
 def default_demos_path(env_id: str) -> Path:
@@ -130,9 +172,14 @@ def default_demos_path(env_id: str) -> Path:
     return DATA_DIR / "experts" / env_id / "demos.npz"
 
 
+def demos_path(config: TrainConfig) -> Path:
+    """The demo file a run imitates: ``config.demos``, or the env's shipped expert demos."""
+    return Path(config.demos) if config.demos else default_demos_path(config.env)
+
+
 def load_demos(config: TrainConfig) -> list[demo_io.Episode]:
     """The first ``num_demos`` demos of the configured file, with clear errors."""
-    path = Path(config.demos) if config.demos else default_demos_path(config.env)
+    path = demos_path(config)
     if not path.is_file():
         hint = "" if config.demos else " (no shipped expert demos for this env yet: pass --demos)"
         raise FileNotFoundError(f"no demonstration file at {path}{hint}")

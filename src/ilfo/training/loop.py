@@ -53,10 +53,12 @@ from ilfo.training.run_dir import (
     BEST_POLICY_INFO,
     CHECKPOINTS_DIR,
     CONFIG_FILE,
+    DEMOS_RECORD_FILE,
     FINAL_POLICY_FILE,
     RunLock,
     fault_point,
     latest_checkpoint,
+    read_demos_record,
     read_run_config,
     remove_incomplete_checkpoints,
 )
@@ -110,6 +112,7 @@ class Trainer:
         demos = load_demo_set(config, env.obs_dim)
         self.demos, self.demo_return = demos.observations, demos.mean_return
         self.distance_probe = demos.distance_probe
+        self.demo_source = demos.source
         self.rewarder = make_reward(config, self.demos)
         self.agent = make_agent(config, env, self.demos)
         self.state = self.agent.functions.init(config.seed)
@@ -168,6 +171,28 @@ class Trainer:
             )
         resolved = self.config.resolved(self.horizon)  # every setting, as the run uses it
         write_json_atomic(config_path, dataclasses.asdict(resolved))
+        if self.demo_source is not None:
+            write_json_atomic(self.run_dir / DEMOS_RECORD_FILE, self.demo_source.as_record(0))
+
+    def _check_demos_record(self) -> None:
+        """On resume: warn where the demo file no longer holds what the run started on (an
+        expert re-exported since); record it where the run predates ``demos.json``."""
+        source = self.demo_source
+        if source is None:
+            return
+        record = read_demos_record(self.run_dir)
+        if record is None:
+            write_json_atomic(self.run_dir / DEMOS_RECORD_FILE, source.as_record(self.step))
+        elif record.get("sha256") != source.sha256:
+            warnings.warn(
+                f"{source.path} is not the demo file this run started on "
+                f"({record.get('path')}, sha256 {str(record.get('sha256'))[:12]}..., recorded "
+                f"in {self.run_dir / DEMOS_RECORD_FILE}): the run continues on its demos, whose "
+                f"mean return {source.mean_return:.6g} now divides the scores (it was "
+                f"{record.get('mean_return')}); its report cell is no longer set beside the "
+                "paper's",
+                stacklevel=3,
+            )
 
     def _loop(self) -> None:
         """Episodes until ``config.steps``, checkpointing by steps and by the clock; the first
@@ -511,6 +536,7 @@ class Trainer:
             remove_incomplete_checkpoints(run_dir)
             if steps is not None:
                 write_json_atomic(run_dir / CONFIG_FILE, raw)
+            trainer._check_demos_record()
             truncate_metrics(run_dir / "metrics.csv", trainer.step)
         except BaseException:
             lock.release()

@@ -37,6 +37,7 @@ if TYPE_CHECKING:  # at run time these are imported where used: they import this
     from ilfo.training.config import TrainConfig
 
 CONFIG_FILE = "config.json"
+DEMOS_RECORD_FILE = "demos.json"  # which demo file an imitation run imitates (its sha256)
 CHECKPOINTS_DIR = "checkpoints"
 LOCK_FILE = ".lock"
 CHECKPOINT_FILES = ("state.json", "agent.msgpack")
@@ -158,6 +159,18 @@ def read_run_config(run_dir: str | Path) -> dict[str, Any]:
     path = Path(run_dir) / CONFIG_FILE
     if not path.is_file():
         raise FileNotFoundError(f"{run_dir} is not a run directory (no {CONFIG_FILE})")
+    return _read_json_object(path)
+
+
+def read_demos_record(run_dir: str | Path) -> dict[str, Any] | None:
+    """A run's ``demos.json`` (``build.DemoSource.as_record``: the demo file it imitates, its
+    sha256, the demos' mean return); None for a run without demos or one older than the
+    record. A ValueError names a damaged file."""
+    path = Path(run_dir) / DEMOS_RECORD_FILE
+    return _read_json_object(path) if path.is_file() else None
+
+
+def _read_json_object(path: Path) -> dict[str, Any]:
     try:
         raw = json.loads(path.read_text(encoding="utf-8"))
     except UnicodeDecodeError as err:
@@ -165,7 +178,7 @@ def read_run_config(run_dir: str | Path) -> dict[str, Any]:
     except json.JSONDecodeError as err:
         raise ValueError(f"{path} is not valid JSON ({err}); it may be truncated") from None
     if not isinstance(raw, dict):
-        raise ValueError(f"{path} must hold a JSON object of settings, not {type(raw).__name__}")
+        raise ValueError(f"{path} must hold a JSON object, not {type(raw).__name__}")
     return raw
 
 
@@ -242,6 +255,7 @@ def load_run_policy(run_dir: str | Path, which: str = "final") -> RunPolicy:
 
 SNAPSHOT_FILES = (
     CONFIG_FILE,
+    DEMOS_RECORD_FILE,
     "metrics.csv",
     FINAL_POLICY_FILE,
     BEST_POLICY_FILE,
