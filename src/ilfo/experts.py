@@ -12,7 +12,6 @@ A shipped expert lives in ``data/experts/<env_id>/``:
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import os
 import shutil
@@ -27,7 +26,7 @@ from ilfo import demos as demo_io
 from ilfo.agents import Policy, policy_of
 from ilfo.envs import make_env, termination_is_finish
 from ilfo.experiments.paper import paper_expert_returns
-from ilfo.files import load_msgpack
+from ilfo.files import file_sha256, load_msgpack
 from ilfo.paths import DATA_DIR
 from ilfo.training import (
     BEST_POLICY_FILE,
@@ -319,8 +318,7 @@ def write_card(
         **card_evaluation(directory, eval_episodes),
         "note": note,
         "sha256": {
-            name: hashlib.sha256((directory / name).read_bytes()).hexdigest()
-            for name in (POLICY_FILE, EXPERT_FILE, DEMOS_FILE)
+            name: file_sha256(directory / name) for name in (POLICY_FILE, EXPERT_FILE, DEMOS_FILE)
         },
     }
     (directory / CARD_FILE).write_text(json.dumps(card, indent=2) + "\n")

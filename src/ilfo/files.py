@@ -7,6 +7,7 @@ of it.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import tomllib
@@ -28,6 +29,15 @@ def write_json_atomic(path: str | Path, value: Any) -> None:
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text(json.dumps(value, indent=2) + "\n")
     os.replace(tmp, path)
+
+
+def file_sha256(path: str | Path) -> str:
+    """The sha256 of a file's bytes, hex (read in 1 MiB blocks: a demo file can be tens of MB)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def load_msgpack(template: T, path: str | Path, what: str) -> T:

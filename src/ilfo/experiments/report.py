@@ -178,7 +178,8 @@ def _same_file_as_shipped(record: dict[str, Any] | None, env: str) -> bool:
 
 @functools.cache
 def _shipped_demos_sha256(env: str) -> str | None:
-    from ilfo.training.build import default_demos_path, file_sha256
+    from ilfo.files import file_sha256
+    from ilfo.training.build import default_demos_path
 
     path = default_demos_path(env)
     return file_sha256(path) if path.is_file() else None

@@ -6,7 +6,6 @@ of algorithms.
 
 from __future__ import annotations
 
-import hashlib
 import math
 import time
 import warnings
@@ -25,6 +24,7 @@ from ilfo.agents import AgentFunctions
 from ilfo.agents.base import OnPolicyAgentFunctions
 from ilfo.algos import AGENT_PARTS, REWARD_PARTS, LearnedRewardPart, RewardPart
 from ilfo.envs import make_env, match_observation_width
+from ilfo.files import file_sha256
 from ilfo.paths import DATA_DIR
 from ilfo.rewards import OOPS, EpisodeReward, expert_transitions
 from ilfo.training.config import TrainConfig
@@ -122,15 +122,6 @@ class DemoSource:
             "mean_return": mean,
             "since_step": since_step,
         }
-
-
-def file_sha256(path: str | Path) -> str:
-    """The sha256 of a file's bytes, hex."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 class DemoSet(NamedTuple):
