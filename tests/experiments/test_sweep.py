@@ -24,6 +24,7 @@ from ilfo.experiments import (
     record_attempt,
     run_status,
     run_sweep,
+    select_runs,
     snapshot_sweep,
 )
 from ilfo.experiments.worker import pin_from_environment, thread_environment
@@ -264,6 +265,40 @@ def test_scheduler_skips_retries_and_gives_up(tmp_path):
     assert backend.started == []
 
 
+def test_select_runs_by_pattern():
+    names = [
+        "Hopper-v5__oops-td3__demos1__0",
+        "Hopper-v5__pwil-td3__demos1__0",
+        "Ant-v5__oops-td3__demos1__0",
+        "Ant-v5__pwil-td3__demos1__0",
+    ]
+    assert select_runs(names) == tuple(names)
+    assert select_runs(names, only=["Ant-v5__*"]) == tuple(names[2:])
+    assert select_runs(names, skip=["Ant-v5__*"]) == tuple(names[:2])
+    assert select_runs(names, only=["*__pwil-td3__*"], skip=["Ant-v5__*"]) == (names[1],)
+    assert select_runs(names, only=["Hopper-v5__*", "*__pwil-td3__*"]) == (
+        names[0],
+        names[1],
+        names[3],
+    )
+    with pytest.raises(ValueError, match="no run matches 'Ant-v4__\\*'"):
+        select_runs(names, skip=["Ant-v4__*"])  # a typo is an error, not "skip nothing"
+
+
+def test_scheduler_runs_only_the_chosen_runs(tmp_path):
+    sweep = create_sweep(tmp_path, SweepSpec(seed=(0, 1, 2), config=TINY))
+    a, b, c = (r.name for r in sweep.runs)
+    backend = _FakeBackend({a: ["done"], c: ["done"]})
+    final = {s.name: s for s in run_sweep(sweep, backend, poll_seconds=0, names=[a, c])}
+    assert backend.started == [a, c]
+    assert final[b].state == "pending"  # reported, untouched
+    backend = _FakeBackend({b: ["done"]})  # a later sweep without the choice runs the rest
+    run_sweep(sweep, backend, poll_seconds=0)
+    assert backend.started == [b]
+    with pytest.raises(KeyError, match="no runs named"):
+        run_sweep(sweep, _FakeBackend({}), poll_seconds=0, names=["nope"])
+
+
 def test_thread_environment_and_pinning():
     env = thread_environment(2, [0])
     assert env["OPENBLAS_NUM_THREADS"] == env["OMP_NUM_THREADS"] == "2"
@@ -347,3 +382,20 @@ def test_ray_backend_runs_a_tiny_sweep(tmp_path):
         starts = [e for e in read_attempts(sweep, run.name) if e["event"] == "start"]
         assert len(starts) == 1 and starts[0]["threads"]["OPENBLAS_NUM_THREADS"] == "1"
         assert "intra_op_parallelism_threads=1" in starts[0]["threads"]["XLA_FLAGS"]
+
+
+def test_cli_dry_run_shows_what_only_and_skip_leave_out(tmp_path, capsys):
+    from ilfo.cli import main
+
+    axes = ["--env", "Hopper-v5", "Walker2d-v5", "--algo", "oops-td3", "pwil-td3"]
+    root = str(tmp_path / "sweep")
+    assert main(["sweep", "run", root, *axes, "--skip", "Walker2d-v5__*", "--dry-run"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines == [
+        "Hopper-v5__oops-td3__demos1__0",
+        "Hopper-v5__pwil-td3__demos1__0",
+        "Walker2d-v5__oops-td3__demos1__0  (left out)",
+        "Walker2d-v5__pwil-td3__demos1__0  (left out)",
+    ]
+    assert main(["sweep", "run", root, *axes, "--only", "Hoper-v5__*", "--dry-run"]) != 0
+    assert "no run matches 'Hoper-v5__*'" in capsys.readouterr().err

@@ -53,6 +53,22 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="forget the failures of runs that were given up, so that they run again",
     )
+    run.add_argument(
+        "--only",
+        nargs="+",
+        default=(),
+        metavar="PATTERN",
+        help="run only the runs whose names match one of these shell patterns (e.g. "
+        "'Hopper-v5__*' '*__pwil-td3__*'); the others are left as they are",
+    )
+    run.add_argument(
+        "--skip",
+        nargs="+",
+        default=(),
+        metavar="PATTERN",
+        help="leave out the runs whose names match one of these patterns, for now (e.g. "
+        "'Ant-v5__*' while its expert retrains); a later `sweep run` without it runs them",
+    )
     _add_backend_arguments(run)
     run.add_argument("--dry-run", action="store_true", help="list the runs and stop")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -120,6 +136,7 @@ def _run_sweep(args: argparse.Namespace) -> int:
         progress_line,
         record_attempt,
         run_sweep,
+        select_runs,
     )
 
     rest = list(args.rest)
@@ -130,15 +147,19 @@ def _run_sweep(args: argparse.Namespace) -> int:
     elif args.dry_run:
         from ilfo.experiments import expand
 
-        for run in expand(spec):
-            print(run.name)
+        names = [run.name for run in expand(spec)]
+        chosen = select_runs(names, args.only, args.skip)
+        for name in names:
+            print(name if name in chosen else f"{name}  (left out)")
         return 0
     else:
         sweep = create_sweep(root, spec)
+    chosen = select_runs([run.name for run in sweep.runs], args.only, args.skip)
     statuses = sweep.statuses()
     if args.dry_run:
         for status in statuses:
-            print(f"{status.name}  {status.state}")
+            left_out = "" if status.name in chosen else "  (left out)"
+            print(f"{status.name}  {status.state}{left_out}")
         return 0
     if args.retry_failed:
         for status in statuses:
@@ -146,11 +167,16 @@ def _run_sweep(args: argparse.Namespace) -> int:
                 record_attempt(sweep, status.name, "reset")
     backend = _backend_factory(args)()
     print(f"sweep {root}: {len(sweep.runs)} runs, {backend.slots} at once ({args.backend})")
+    if len(chosen) < len(sweep.runs):
+        print(
+            f"running {len(chosen)} of them (--only/--skip); the other "
+            f"{len(sweep.runs) - len(chosen)} are left as they are"
+        )
     print(progress_line(statuses))
     display = _Progress(statuses, enabled=not args.no_progress)
     try:
         with stop_signals_interrupt():
-            final = run_sweep(sweep, backend, on_change=display.update)
+            final = run_sweep(sweep, backend, on_change=display.update, names=chosen)
     finally:
         display.close()
     print(progress_line(final))

@@ -15,6 +15,7 @@ from ilfo.experiments.sweep import (
     read_attempts,
     record_attempt,
     run_status,
+    select_runs,
     snapshot_sweep,
     summary,
 )
@@ -35,6 +36,7 @@ __all__ = [
     "record_attempt",
     "run_status",
     "run_sweep",
+    "select_runs",
     "snapshot_sweep",
     "summary",
 ]

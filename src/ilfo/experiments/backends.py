@@ -20,7 +20,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any, Protocol
 
 from ilfo.experiments.sweep import RunStatus, Sweep, record_attempt, run_status, summary
@@ -210,14 +210,19 @@ def run_sweep(
     *,
     poll_seconds: float = 1.0,
     on_change: Callable[[list[RunStatus], str], None] | None = None,
+    names: Collection[str] | None = None,
 ) -> list[RunStatus]:
     """Run the sweep's unfinished runs to their ends (see the module); returns every run's
-    final status. ``on_change(statuses, message)`` is called at each start and end (and about
-    every ``poll_seconds`` with an empty message) for progress display."""
+    final status. ``names`` limits that to some runs (``Sweep.select``; the others are left
+    as they are, and still reported). ``on_change(statuses, message)`` is called at each start
+    and end (and about every ``poll_seconds`` with an empty message) for progress display."""
     by_name = {run.name: run for run in sweep.runs}
     statuses = {s.name: s for s in sweep.statuses()}
-    queue = [name for name, s in statuses.items() if s.state == "pending"]
-    elsewhere = [name for name, s in statuses.items() if s.state == "running"]
+    chosen = set(by_name if names is None else names)
+    if unknown := chosen - by_name.keys():
+        raise KeyError(f"{sweep.root} has no runs named {sorted(unknown)}")
+    queue = [name for name, s in statuses.items() if s.state == "pending" and name in chosen]
+    elsewhere = [name for name, s in statuses.items() if s.state == "running" and name in chosen]
     active: dict[int, Job] = {}  # slot -> job
     notify = on_change or (lambda statuses, message: None)
     last_progress = time.monotonic()

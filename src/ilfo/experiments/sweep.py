@@ -19,6 +19,7 @@ skipped, interrupted ones resume from their checkpoints, and each run is trained
 from __future__ import annotations
 
 import dataclasses
+import fnmatch
 import json
 import socket
 import time
@@ -260,6 +261,28 @@ class Sweep:
 
     def statuses(self) -> list[RunStatus]:
         return [run_status(self, run) for run in self.runs]
+
+
+def select_runs(
+    names: Sequence[str], only: Sequence[str] = (), skip: Sequence[str] = ()
+) -> tuple[str, ...]:
+    """The run names that match a pattern of ``only`` (all when it is empty) and none of
+    ``skip``, in their order; patterns are shell globs (``"Ant-v5__*"``, ``"*__pwil-td3__*"``).
+    A pattern that matches no run is an error: a misspelt one would otherwise silently run
+    everything or nothing."""
+    for pattern in (*only, *skip):
+        if not fnmatch.filter(names, pattern):
+            example = f", e.g. {names[0]!r}" if names else ""
+            raise ValueError(
+                f"no run matches {pattern!r} (runs are named ENV__ALGO__demosN__SEED{example})"
+            )
+
+    def matches(name: str, patterns: Sequence[str]) -> bool:
+        return any(fnmatch.fnmatchcase(name, pattern) for pattern in patterns)
+
+    return tuple(
+        name for name in names if (not only or matches(name, only)) and not matches(name, skip)
+    )
 
 
 def create_sweep(root: str | Path, spec: SweepSpec) -> Sweep:
