@@ -94,10 +94,12 @@ def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     run = tmp_path / "run"
     base = ["expert", "train", "Hopper-v5", "--run-dir", str(run), "--no-progress"]
     first = ["--steps", "150", "--eval-every", "100", "--eval-episodes", "1", "--reward-scale", "2"]
-    assert main([*base, *first, "--healthy-angle-range", "-0.15", "0.15"]) == 0
+    assert main([*base, *first, "--gamma", "1.5"]) == 2
+    assert "--gamma must be in (0, 1)" in capsys.readouterr().err
+    assert main([*base, *first, "--healthy-angle-range", "-0.15", "0.15", "--gamma", "0.995"]) == 0
     config = json.loads((run / "config.json").read_text())
     assert (config["eval_every"], config["eval_episodes"]) == (100, 1)
-    assert config["sac"]["reward_scale"] == 2.0
+    assert config["sac"]["reward_scale"] == 2.0 and config["sac"]["gamma"] == 0.995
     assert config["healthy_angle_range"] == [-0.15, 0.15]
     assert main([*base, "--steps", "150"]) == 2  # exists: must say --resume
     assert "--resume" in capsys.readouterr().err
@@ -105,6 +107,8 @@ def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     assert "--reward-scale cannot change on --resume" in capsys.readouterr().err
     assert main([*base, "--resume", "--healthy-angle-range", "-0.2", "0.2"]) == 2
     assert "--healthy-angle-range cannot change on --resume" in capsys.readouterr().err
+    assert main([*base, "--resume", "--gamma", "0.99"]) == 2
+    assert "--gamma cannot change on --resume" in capsys.readouterr().err
     assert main([*base, "--steps", "300", "--resume"]) == 0
     steps = [int(r.split(",")[0]) for r in (run / "metrics.csv").read_text().splitlines()[1:]]
     assert steps == sorted(steps) and steps[-1] >= 300

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import shlex
 from pathlib import Path
@@ -46,6 +47,14 @@ def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="SAC reward scale (default 16 for the Minitaur tasks, whose per-step rewards are "
         "tiny, else 1; a resumed run keeps its own)",
+    )
+    t.add_argument(
+        "--gamma",
+        type=float,
+        default=None,
+        help="SAC discount (default 0.99). Higher values weigh survival further ahead: on "
+        "MinitaurDuck, where losing the duck ends the episode, 0.99 looks ~100 steps ahead of a "
+        "1,000-step task (docs/experts.md); a resumed run keeps its own",
     )
     t.add_argument(
         "--healthy-angle-range",
@@ -110,15 +119,22 @@ def _run_expert_train(args: argparse.Namespace) -> int:
             raise ValueError(
                 "--healthy-angle-range cannot change on --resume: the run keeps its own"
             )
+        if args.gamma is not None:
+            raise ValueError("--gamma cannot change on --resume: the run keeps its own")
         trainer = Trainer.resume(run_dir, progress=not args.no_progress, steps=args.steps)
     else:
         if (run_dir / "config.json").exists():
             raise ValueError(f"{run_dir} exists: continue it with --resume, or pass --run-dir")
         scale = expert_reward_scale(args.env) if args.reward_scale is None else args.reward_scale
+        sac = SACConfig(reward_scale=scale)
+        if args.gamma is not None:
+            if not 0.0 < args.gamma < 1.0:
+                raise ValueError(f"--gamma must be in (0, 1), got {args.gamma}")
+            sac = dataclasses.replace(sac, gamma=args.gamma)
         config = TrainConfig(
             env=args.env,
             algo="sac",
-            sac=SACConfig(reward_scale=scale),
+            sac=sac,
             best_by="return",
             healthy_angle_range=args.healthy_angle_range,  # a list: TrainConfig makes it a tuple
             seed=args.seed,
