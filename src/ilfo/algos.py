@@ -275,7 +275,9 @@ REWARD_PARTS: dict[str, RewardPart | LearnedRewardPart] = {
         config=PWILConfig,
         make=PWIL,
         title="PWIL rewarder",
-        description="Defaults: the paper's.",
+        description="Defaults: ilfo's PWIL-(s); --pwil-subsample 20 and --pwil-kernel-dim "
+        "|S|+|A| are PWIL's own code. Set by the trainer: seed.",
+        set_by_trainer=("seed",),
     ),
     "sil": RewardPart(
         config=SILConfig,

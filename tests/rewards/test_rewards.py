@@ -106,6 +106,50 @@ def test_pwil_horizon_gives_short_episodes_less_mass():
         PWIL([demo], PWILConfig(horizon=5))(demo)
 
 
+def test_pwil_subsample_keeps_every_kth_state_from_a_seeded_offset():
+    demos = [_episode(length=40, seed=23), _episode(length=40, seed=24)]
+    full = PWIL(demos)
+    assert len(full.expert_atoms) == 80
+    offsets = set()
+    for seed in range(8):
+        pwil = PWIL(demos, PWILConfig(subsample=4, seed=seed))
+        assert len(pwil.expert_atoms) == 20  # 10 of each demo's 40 states
+        first, second = pwil.expert_atoms[:10], pwil.expert_atoms[10:]
+        k = int(np.flatnonzero((full.expert_atoms[:40] == first[0]).all(axis=1))[0])
+        np.testing.assert_array_equal(first, full.expert_atoms[k:40:4])
+        assert ((full.expert_atoms[40:] == second[0]).all(axis=1)).any()
+        offsets.add(k)
+        again = PWIL(demos, PWILConfig(subsample=4, seed=seed)).expert_atoms
+        np.testing.assert_array_equal(pwil.expert_atoms, again)  # the seed fixes the offsets
+    assert len(offsets) > 1
+    short = PWIL([_episode(length=3, seed=25)], PWILConfig(subsample=20, seed=1))
+    assert len(short.expert_atoms) == 1  # a demo shorter than the step keeps one state
+    rewards = PWIL(demos, PWILConfig(subsample=4))(_episode(length=40, seed=26)).rewards
+    assert rewards.shape == (40,) and np.isfinite(rewards).all()
+
+
+def test_pwil_kernel_dim_sets_the_kernel_width():
+    demo, learner = _episode(seed=27), _episode(seed=28, scale=1.5)
+    default = PWIL([demo])(learner)
+    costs = default.coupling.row_costs
+    np.testing.assert_allclose(default.rewards, 5.0 * np.exp(-5.0 * 40 / np.sqrt(5) * costs))
+    wide = PWIL([demo], PWILConfig(kernel_dim=9))(learner)
+    np.testing.assert_allclose(wide.rewards, 5.0 * np.exp(-5.0 * 40 / 3.0 * costs))
+    assert (wide.rewards >= default.rewards).all()
+
+
+@pytest.mark.parametrize("bad", [{"subsample": 0}, {"kernel_dim": 0}, {"horizon": 0}])
+def test_pwil_config_refuses_bad_values(bad):
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        PWILConfig(**bad)
+
+
+def test_the_trainer_sets_pwil_seed():
+    from ilfo.training import TrainConfig
+
+    assert TrainConfig(algo="pwil-td3", seed=3).part_config("pwil").seed == 3
+
+
 @pytest.mark.parametrize("make", [OOPS, PWIL])
 @pytest.mark.parametrize(
     ("episode", "match"),

@@ -4,6 +4,11 @@ Each learner step, in order, takes mass 1/horizon from the nearest expert atoms 
 mass (the greedy coupling, as PWIL computes it online along the episode); its reward is
 alpha * exp(-beta * horizon / sqrt(d) * c_t), c_t the cost it transported, on states standardised
 by the expert std. Atoms are the state each transition leads to, s_t+1.
+
+Two settings of PWIL's own code are options here, off by default (the defaults are what ilfo's
+PWIL-(s) results were run with): it keeps every 20th state of each demo from a random offset
+(``subsample``), and its d is |S| + |A| even when it imitates from states alone
+(``kernel_dim``).
 """
 
 from __future__ import annotations
@@ -34,10 +39,23 @@ class PWILConfig:
     horizon: int | None = None
     """Learner mass per step is 1 / horizon (PWIL uses the episode limit, 1,000 in MuJoCo);
     None uses the episode's own length."""
+    subsample: int = 1
+    """Keep every ``subsample``-th state of each demo, from a random offset in [0, subsample)
+    drawn per demo (PWIL's code: 20 on MuJoCo, so a 1,000-step demo gives 50 atoms of weight
+    1/50); 1 keeps every state."""
+    kernel_dim: int | None = None
+    """The d in the kernel's sqrt(d); None: the observations' dimension |S|. PWIL's code uses
+    |S| + |A| also in its observation-only mode (23 on Walker2d, 14 on Hopper)."""
+    seed: int = 0
+    """Draws the subsampling offsets. Set by the trainer: the run's seed."""
 
     def __post_init__(self) -> None:
         if self.horizon is not None and self.horizon < 1:
             raise ValueError(f"horizon must be >= 1, got {self.horizon!r}")
+        if self.subsample < 1:
+            raise ValueError(f"subsample must be >= 1, got {self.subsample!r}")
+        if self.kernel_dim is not None and self.kernel_dim < 1:
+            raise ValueError(f"kernel_dim must be >= 1, got {self.kernel_dim!r}")
 
 
 class PWIL:
@@ -52,7 +70,14 @@ class PWIL:
         self.obs_dim = demos[0].shape[1]
         # Euclidean distances ignore the mean, so only the expert std matters (PWIL's scaler).
         self.standardizer = Standardizer.from_demos(demos, std_factor=1.0, std_floor=0.0, eps=0.0)
-        self.expert_atoms = np.concatenate([self.standardizer(d[1:]) for d in demos])
+        step, rng = self.config.subsample, np.random.default_rng(self.config.seed)
+        # The offset stays within a short demo, so that each demo keeps at least one atom.
+        self.expert_atoms = np.concatenate(
+            [
+                self.standardizer(d[1:][rng.integers(0, min(step, len(d) - 1)) :: step])
+                for d in demos
+            ]
+        )
 
     def state(self) -> RewardState:
         """Nothing: PWIL-(s) rewards each episode on its own (its coupling is deterministic)."""
@@ -72,7 +97,7 @@ class PWIL:
         a = np.full(num_steps, 1.0 / horizon)
         coupling = greedy(cost_matrix(learner, self.expert_atoms, "euclidean"), a=a)
         cfg = self.config
-        scale = cfg.beta * horizon / np.sqrt(self.obs_dim)
+        scale = cfg.beta * horizon / np.sqrt(cfg.kernel_dim or self.obs_dim)
         return RewardOutput(
             rewards=cfg.alpha * np.exp(-scale * coupling.row_costs),
             coupling=coupling,
