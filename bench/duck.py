@@ -23,7 +23,7 @@ import numpy as np
 
 # Keep this folder off the path: bench/ot.py would shadow POT's `ot`.
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
-from ilfo.benchmarking import machine
+from ilfo.benchmarking import machine, parse_policy_arguments
 from ilfo.envs import make_env
 from ilfo.envs.bullet import MINITAUR_DUCK_ENV_ID
 from ilfo.experts import load_expert
@@ -68,15 +68,7 @@ def duck_episode(act: Any, seed: int) -> dict[str, Any]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("run_dir", nargs="?", help="an `ilfo train` or `ilfo expert train` run")
-    parser.add_argument("--expert", default=None, help="an exported expert (env id or directory)")
-    parser.add_argument("--best", action="store_true", help="the run's best policy, not its last")
-    parser.add_argument("--episodes", type=int, default=5)
-    parser.add_argument("--first-seed", type=int, default=1000)
-    parser.add_argument("--json", action="store_true")
-    args = parser.parse_args()
-    if (args.run_dir is None) == (args.expert is None):
-        parser.error("give a run directory or --expert, not both")
+    args = parse_policy_arguments(parser, first_seed=1000)
     if args.expert:
         expert = load_expert(args.expert)
         agent, policy, label = expert.agent, expert.policy, f"expert {args.expert}"

@@ -23,7 +23,7 @@ import numpy as np
 # Keep this folder off the path: bench/ot.py would shadow POT's `ot`.
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 from ilfo import demos as demo_io
-from ilfo.benchmarking import machine
+from ilfo.benchmarking import machine, parse_policy_arguments
 from ilfo.envs import HEALTHY_ANGLE_ENVS, episode_scores, make_env
 from ilfo.experts import load_expert
 from ilfo.training import default_demos_path, load_run_policy, rollout_policy
@@ -47,15 +47,7 @@ def health_report(env: Any, observations: np.ndarray) -> dict[str, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("run_dir", nargs="?", help="an `ilfo train` run directory")
-    parser.add_argument("--expert", default=None, help="a shipped expert's env id (or directory)")
-    parser.add_argument("--best", action="store_true", help="the run's best policy, not its last")
-    parser.add_argument("--episodes", type=int, default=5)
-    parser.add_argument("--first-seed", type=int, default=10_000)
-    parser.add_argument("--json", action="store_true")
-    args = parser.parse_args()
-    if (args.run_dir is None) == (args.expert is None):
-        parser.error("give a run directory or --expert, not both")
+    args = parse_policy_arguments(parser, first_seed=10_000)
 
     if args.expert:
         expert = load_expert(args.expert)

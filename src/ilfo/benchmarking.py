@@ -3,6 +3,7 @@ they print their rows."""
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import platform
@@ -45,3 +46,19 @@ def print_rows(
     print("|" + "---|" * len(columns))
     for row in rows:
         print("| " + " | ".join(fmt.format(**row) for fmt in columns.values()) + " |")
+
+
+def parse_policy_arguments(parser: argparse.ArgumentParser, first_seed: int) -> argparse.Namespace:
+    """Parse the arguments of a bench script that rolls out one policy: a run directory (its
+    final policy, or ``--best``) or ``--expert`` (an exported expert), exactly one of them, on
+    ``--episodes`` seeds from ``--first-seed``, printed as a table or ``--json`` lines."""
+    parser.add_argument("run_dir", nargs="?", help="an `ilfo train` or `ilfo expert train` run")
+    parser.add_argument("--expert", default=None, help="an exported expert (env id or directory)")
+    parser.add_argument("--best", action="store_true", help="the run's best policy, not its last")
+    parser.add_argument("--episodes", type=int, default=5)
+    parser.add_argument("--first-seed", type=int, default=first_seed)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    if (args.run_dir is None) == (args.expert is None):
+        parser.error("give a run directory or --expert, not both")
+    return args
