@@ -213,7 +213,7 @@ def run_sweep(
     names: Collection[str] | None = None,
 ) -> list[RunStatus]:
     """Run the sweep's unfinished runs to their ends (see the module); returns every run's
-    final status. ``names`` limits that to some runs (``Sweep.select``; the others are left
+    final status. ``names`` limits that to some runs (``select_runs``; the others are left
     as they are, and still reported). ``on_change(statuses, message)`` is called at each start
     and end (and about every ``poll_seconds`` with an empty message) for progress display."""
     by_name = {run.name: run for run in sweep.runs}
