@@ -399,3 +399,6 @@ def test_cli_dry_run_shows_what_only_and_skip_leave_out(tmp_path, capsys):
     ]
     assert main(["sweep", "run", root, *axes, "--only", "Hoper-v5__*", "--dry-run"]) != 0
     assert "no run matches 'Hoper-v5__*'" in capsys.readouterr().err
+    fresh = tmp_path / "fresh"
+    assert main(["sweep", "run", str(fresh), *axes, "--skip", "Hoper-v5__*"]) != 0
+    assert not fresh.exists()  # refused before the sweep directory is made

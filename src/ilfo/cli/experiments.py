@@ -132,6 +132,7 @@ def _spec_from_args(args: argparse.Namespace, rest: list[str]) -> Any:
 def _run_sweep(args: argparse.Namespace) -> int:
     from ilfo.experiments import (
         create_sweep,
+        expand,
         open_sweep,
         progress_line,
         record_attempt,
@@ -142,19 +143,16 @@ def _run_sweep(args: argparse.Namespace) -> int:
     rest = list(args.rest)
     spec = _spec_from_args(args, rest)
     root = Path(args.dir)
-    if spec is None:
-        sweep = open_sweep(root)
-    elif args.dry_run:
-        from ilfo.experiments import expand
-
-        names = [run.name for run in expand(spec)]
-        chosen = select_runs(names, args.only, args.skip)
-        for name in names:
-            print(name if name in chosen else f"{name}  (left out)")
-        return 0
-    else:
+    sweep = open_sweep(root) if spec is None else None
+    runs = sweep.runs if sweep is not None else expand(spec)
+    # Chosen before a new sweep directory is made: a misspelt pattern leaves nothing behind.
+    chosen = select_runs([run.name for run in runs], args.only, args.skip)
+    if sweep is None:
+        if args.dry_run:
+            for run in runs:
+                print(run.name if run.name in chosen else f"{run.name}  (left out)")
+            return 0
         sweep = create_sweep(root, spec)
-    chosen = select_runs([run.name for run in sweep.runs], args.only, args.skip)
     statuses = sweep.statuses()
     if args.dry_run:
         for status in statuses:
