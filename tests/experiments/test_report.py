@@ -157,6 +157,36 @@ def test_runs_that_observed_other_than_the_default_contact_forces_are_a_cell_of_
     }
 
 
+def test_runs_whose_reward_settings_differ_from_the_algos_are_a_cell_of_their_own(tmp_path):
+    """A run given other reward settings (``--pwil-subsample 20``) is not a seed of the default
+    cell; the seed (set by the trainer), a setting written out at its default, and a config
+    that predates a setting are."""
+
+    def run_with(name, seed, **settings):
+        run = _fake_run(tmp_path, name, env="Walker2d-v5", algo="pwil-td3", seed=seed,
+                        scores=[0.5])  # fmt: skip
+        config = json.loads((run / "config.json").read_text())
+        (run / "config.json").write_text(json.dumps({**config, **settings}))
+
+    run_with("default", 0)
+    run_with("old", 1, pwil={"alpha": 5.0, "beta": 5.0, "horizon": None})
+    run_with("written", 2, pwil={"alpha": 5.0, "subsample": 1, "kernel_dim": None, "seed": 2})
+    run_with("own", 3, pwil={"subsample": 20, "kernel_dim": 23, "seed": 3})
+    run_with("alpha", 4, pwil={"alpha": 2.5})
+    runs, _ = collect_runs([tmp_path])
+    assert {r.seed: r.variant for r in runs} == {
+        0: None,
+        1: None,
+        2: None,
+        3: "pwil.subsample=20+pwil.kernel_dim=23",
+        4: "pwil.alpha=2.5",
+    }
+    assert read_run(tmp_path / "own", "w_greedy").variant == "w_greedy"  # a sweep's says how
+    report = build_report(runs, resamples=100)
+    assert report.cell("Walker2d-v5", "pwil-td3", 1).versus_paper is not None
+    assert len(report.cell("Walker2d-v5", "pwil-td3", 1).runs) == 3
+
+
 def test_report_over_a_fixture_against_hand_computations(tmp_path):
     finals = {0: 0.9, 1: 1.0, 2: 0.5}
     for seed, final in finals.items():

@@ -15,6 +15,7 @@ paper does not say which it uses.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import functools
 import math
 import warnings
@@ -131,6 +132,37 @@ def _contact_forces_variant(config: dict[str, Any]) -> str | None:
     return "contact-forces" if observed else "no-contact-forces"
 
 
+def _reward_settings_variant(config: dict[str, Any], source: Path) -> str | None:
+    """For a run of an imitation algo, the settings of its reward in which it differs from the
+    algo's defaults for its env, as "pwil.subsample=20+pwil.kernel_dim=23"; None where it has
+    none (the seed, which the trainer sets, is not a setting). A setting a config predates
+    reads back as its default."""
+    from ilfo.algos import ALGOS, REWARD_PARTS
+    from ilfo.training.config import TrainConfig, config_from_dict
+
+    recipe = ALGOS.get(str(config.get("algo")))
+    if recipe is None or recipe.reward is None:
+        return None
+    run = config_from_dict(config, source)
+    default = TrainConfig(env=run.env, algo=run.algo, seed=run.seed)
+    given, usual = run.part_config(recipe.reward), default.part_config(recipe.reward)
+    set_by_trainer = REWARD_PARTS[recipe.reward].set_by_trainer
+    changed = [
+        f"{recipe.reward}.{f.name}={_setting_label(getattr(given, f.name))}"
+        for f in dataclasses.fields(given)
+        if f.name not in set_by_trainer and getattr(given, f.name) != getattr(usual, f.name)
+    ]
+    return "+".join(changed) or None
+
+
+def _setting_label(value: Any) -> str:
+    if isinstance(value, float):
+        return format(value, "g")
+    if isinstance(value, tuple | list):
+        return "-".join(map(_setting_label, value))
+    return str(value)
+
+
 def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | None:
     """A run's evaluations (None if it has none with a normalised score yet)."""
     from ilfo.training import read_metrics, read_run_config
@@ -143,7 +175,10 @@ def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | Non
     shipped = imitates_shipped_demos(config.get("demos"), env) and _same_file_as_shipped(
         record, env
     )
-    # Runs that observed otherwise than the default are not its cell (nor a sweep variant's).
+    # Runs that observed otherwise than the default are not its cell (nor a sweep variant's),
+    # nor are runs whose reward differs from the algo's (a sweep's variant already says how).
+    if variant is None:
+        variant = _reward_settings_variant(config, run_dir / "config.json")
     labels = (variant, _contact_forces_variant(config))
     variant = "+".join(label for label in labels if label) or None
     if not (run_dir / "metrics.csv").is_file():  # a sweep's run before its first episode
