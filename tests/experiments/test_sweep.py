@@ -96,6 +96,33 @@ def test_dropping_contact_forces_applies_to_the_envs_that_observe_them():
     assert [r.config["contact_forces"] for r in expand(default)] == [None, None]
 
 
+def test_a_finished_runs_config_json_as_the_spec_config_repeats_it_on_the_sweeps_axes(tmp_path):
+    """A spec's config may name a run's config.json: its settings are kept, its env, algo,
+    demos, seed and out are the sweep's, and its contact-force choice goes with its env."""
+    from ilfo.training import TrainConfig
+
+    recorded = TrainConfig(
+        env="Humanoid-v5", seed=5, steps=123_000, preset="fast", contact_forces=True, out="x"
+    ).resolved(horizon=1000)
+    record = tmp_path / "config.json"
+    raw = dataclasses.asdict(recorded)
+    raw["td3"]["batch_size"] = 64  # a part's setting off its default
+    record.write_text(json.dumps(raw))
+    spec_file = {"env": ["Hopper-v5", "Ant-v5"], "seed": "0-1", "config": str(record)}
+    runs = expand(SweepSpec.from_dict(spec_file))
+    assert [(r.config["env"], r.config["seed"]) for r in runs] == [
+        ("Hopper-v5", 0),
+        ("Ant-v5", 0),
+        ("Hopper-v5", 1),
+        ("Ant-v5", 1),
+    ]
+    assert all(r.config["steps"] == 123_000 for r in runs)
+    assert all(r.config["td3"]["batch_size"] == 64 for r in runs)
+    assert all(r.config["td3"]["critic_hidden"] == [256, 256] for r in runs)  # the fast preset
+    assert all(r.config["contact_forces"] is None for r in runs)  # each env's own default
+    assert all(r.config["out"] != "x" for r in runs)
+
+
 @pytest.mark.parametrize(
     "kwargs, message",
     [

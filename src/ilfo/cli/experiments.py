@@ -37,7 +37,8 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
         epilog='Spec file (JSON or TOML): {"env": [...], "algo": [...], "num_demos": '
         '[1, 4, 10], "seed": "0-4", "config": {"steps": 1000000, "preset": "fast"}, '
         '"variants": {"lambda0.1": {"oops": {"reg": 0.1}}}, "retries": 2}; config may '
-        "name a settings file (a run's config.json).",
+        "name a settings file (a run's config.json, whose env, algo, demos, seed and out the "
+        "sweep sets).",
     )
     run.add_argument("dir", help="the sweep directory (created if missing)")
     run.add_argument("--spec", default=None, metavar="FILE", help="a sweep spec file")

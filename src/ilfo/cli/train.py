@@ -84,22 +84,17 @@ def settings_from_args(
     A run's config.json records the contact forces its env and algo observed: where the flags
     change (or ``drop`` leaves out) the file's env or algo, that choice is left out too (the new
     pair's default) unless a flag sets it."""
-    from ilfo.algos import PART_CONFIGS
     from ilfo.files import read_settings_file
+    from ilfo.training import settings_for_new_runs
 
     settings: dict[str, Any] = {}
     if config_file is not None:
         settings = read_settings_file(config_file)
-        if any(
-            k in settings and (k in drop or (k in overrides and overrides[k] != settings[k]))
-            for k in ("env", "algo")
-        ):
-            drop = (*drop, "contact_forces")
-        settings = {
-            k: v
-            for k, v in settings.items()
-            if k not in drop and not (k in PART_CONFIGS and v is None)
-        }
+        # A flag that changes the file's env or algo replaces it, as ``drop`` does.
+        changed = tuple(
+            k for k in ("env", "algo") if k in overrides and overrides[k] != settings.get(k)
+        )
+        settings = settings_for_new_runs(settings, (*drop, *changed))
     settings.update(overrides)
     for name, given in groups.items():
         settings[name] = {**(settings.get(name) or {}), **given}

@@ -57,7 +57,7 @@ class SweepSpec:
     (``TrainConfig`` fields; a part's dict, e.g. ``{"td3": {"batch_size": 256}}``, changes
     single fields of its default). A part's settings apply to the runs whose algo uses it."""
     variants: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
-    """Named changes of ``config`` (e.g. ``{"lambda0.1": {"oops": {"epsilon": 0.1}}}``), each
+    """Named changes of ``config`` (e.g. ``{"lambda0.1": {"oops": {"reg": 0.1}}}``), each
     a further axis value; none: one unnamed variant, the base config."""
     retries: int = 2
     """How many times a run that ended with an error is started again."""
@@ -124,7 +124,12 @@ class SweepSpec:
         if isinstance(values.get("seed"), str):
             values["seed"] = parse_seeds([values["seed"]])
         if isinstance(values.get("config"), str):
-            values["config"] = read_settings_file(values["config"])
+            from ilfo.training import settings_for_new_runs
+
+            # A finished run's config.json repeats that run: the sweep sets its axes and out.
+            values["config"] = settings_for_new_runs(
+                read_settings_file(values["config"]), (*AXES, "out")
+            )
         try:
             return cls(**values)
         except (TypeError, ValueError) as err:

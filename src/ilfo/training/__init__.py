@@ -31,7 +31,13 @@ from ilfo.training.build import (
     run_name,
 )
 from ilfo.training.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
-from ilfo.training.config import Algo, TrainConfig, config_from_dict, config_from_settings
+from ilfo.training.config import (
+    Algo,
+    TrainConfig,
+    config_from_dict,
+    config_from_settings,
+    settings_for_new_runs,
+)
 from ilfo.training.loop import LoopHooks, Trainer
 from ilfo.training.metrics import METRIC_FIELDS, read_metrics
 from ilfo.training.plots import plot_runs
@@ -100,4 +106,5 @@ __all__ = [
     "run_name",
     "save_checkpoint",
     "score_policy",
+    "settings_for_new_runs",
 ]

@@ -272,6 +272,21 @@ def default_contact_forces(env: str, imitation: bool) -> bool:
     return env not in CONTACT_FORCE_DIMS or not imitation
 
 
+def settings_for_new_runs(settings: Mapping[str, Any], drop: tuple[str, ...]) -> dict[str, Any]:
+    """A settings file's (or a finished run's config.json's) settings as the base of other
+    runs: without the keys in ``drop`` (what the new runs set themselves: a sweep's axes, the
+    output directory) and without parts that are None (config.json lists every part). A run's
+    config.json records the contact forces its env and algo observed, so dropping ``env`` or
+    ``algo`` drops that choice too (the new pair's default applies)."""
+    if any(key in settings and key in drop for key in ("env", "algo")):
+        drop = (*drop, "contact_forces")
+    return {
+        key: value
+        for key, value in settings.items()
+        if key not in drop and not (key in PART_CONFIGS and value is None)
+    }
+
+
 def config_from_dict(raw: dict[str, Any], source: str | Path) -> TrainConfig:
     """A ``TrainConfig`` from a record ilfo wrote (config.json, expert.json, a sweep's
     manifest); a ValueError names ``source`` and the setting at fault (an unknown key, a value
