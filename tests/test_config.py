@@ -206,6 +206,10 @@ def test_config_from_settings_file_and_flags(tmp_path):
         config_from_args(str(bad), {}, {})
     with pytest.raises(FileNotFoundError):
         config_from_args(str(tmp_path / "missing.json"), {}, {})
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "config.json").write_text("{}")
+    with pytest.raises(ValueError, match=r"is a directory, not a settings file: pass .*config"):
+        config_from_args(str(tmp_path / "run"), {}, {})
 
 
 def test_a_run_configs_contact_forces_follow_its_env_and_algo_under_other_flags(tmp_path):

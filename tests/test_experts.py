@@ -109,6 +109,9 @@ def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     assert "--healthy-angle-range cannot change on --resume" in capsys.readouterr().err
     assert main([*base, "--resume", "--gamma", "0.99"]) == 2
     assert "--gamma cannot change on --resume" in capsys.readouterr().err
+    walker = ["expert", "train", "Walker2d-v5", "--run-dir", str(run), "--no-progress"]
+    assert main([*walker, "--resume"]) == 2
+    assert "trains an expert for Hopper-v5, not Walker2d-v5" in capsys.readouterr().err
     assert main([*base, "--steps", "300", "--resume"]) == 0
     steps = [int(r.split(",")[0]) for r in (run / "metrics.csv").read_text().splitlines()[1:]]
     assert steps == sorted(steps) and steps[-1] >= 300
@@ -126,6 +129,12 @@ def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     assert "kept demos with a fall (seeds [0])" in capsys.readouterr().out
     files = {p.name: p.read_bytes() for p in out.iterdir()}
     assert main(export) == 2  # fails again: the expert exported above stays as it was
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "mine.txt").write_text("keep me")
+    assert main(["expert", "export", str(run), "--out", str(work), "--keep-falls", "-n", "1"]) == 1
+    assert "holds other files than an expert's (mine.txt)" in capsys.readouterr().err
+    assert [p.name for p in work.iterdir()] == ["mine.txt"]  # nothing deleted
     assert {p.name: p.read_bytes() for p in out.iterdir()} == files
     card = json.loads((out / "card.json").read_text())
     assert card["num_demos"] == 1 and card["demo_seeds"] == [0]
@@ -138,6 +147,12 @@ def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     collect = ["demos", "collect", "--expert", str(out), "-n", "2", "--out", str(collected)]
     assert main([*collect, "--keep-falls"]) == 0
     assert len(demos.load(collected).episodes) == 2
+    assert main([*collect, "--keep-falls"]) == 2  # not over an existing file without --force
+    assert "exists: pass --force" in capsys.readouterr().err
+    assert main([*collect, "--keep-falls", "-n", "1", "--force"]) == 0
+    assert len(demos.load(collected).episodes) == 1
+    assert main([*collect[:-1], str(tmp_path / "demos.txt"), "--keep-falls"]) == 2
+    assert "must be a .npz file" in capsys.readouterr().err
     assert (
         main(
             [

@@ -22,6 +22,7 @@ from ilfo.training.run_dir import (
     RunLock,
     create_run_dir,
     latest_checkpoint,
+    snapshot_run,
 )
 from test_train import DEMOS, TINY, _metrics, _train
 
@@ -93,12 +94,41 @@ def test_resume_finds_the_newest_complete_checkpoint_and_removes_leftovers(tmp_p
     (root / ".tmp_step_000000400").mkdir()
     (root / ".tmp_step_000000400" / "agent.msgpack").write_bytes(b"\x00" * 10)
     (root / "latest").write_text("step_000000100")
-    (root / "step_000000350").mkdir()  # no state.json: not a checkpoint
+    (root / "step_000000200").mkdir()  # an older one whose removal was cut short
+    (root / "step_000000200" / "replay.npz").write_bytes(b"\x00" * 10)
     assert latest_checkpoint(run).name == "step_000000300"
     trainer = Trainer.resume(run, progress=False, steps=400)
     assert trainer.step == 300
     assert not (root / ".tmp_step_000000400").exists() and not (root / "latest").exists()
+    assert not (root / "step_000000200").exists()
     assert _metrics(trainer.train()) == full
+
+
+def test_a_newest_checkpoint_missing_files_is_refused_with_the_repair_not_skipped(tmp_path):
+    """Checkpoints are renamed into place once written, so a newest one missing a file had it
+    removed (replay.npz, to free disk): resuming from an older one or from step 0 would drop
+    the steps and metrics logged since. Resume and snapshot say what is missing and how to go on."""
+    full = _metrics(_train(tmp_path, "full", steps=400))
+    run = _train(tmp_path, "run", steps=300, checkpoint_every=100)
+    newest = run / "checkpoints" / "step_000000300"
+    (newest / "replay.npz").unlink()
+    rows = _metrics(run)
+    for attempt in (
+        lambda: Trainer.resume(run, progress=False, steps=400),
+        lambda: snapshot_run(run, tmp_path / "snap"),
+    ):
+        with pytest.raises(FileNotFoundError, match=r"has no replay.npz .*touch .*replay.omitted"):
+            attempt()
+    assert _metrics(run) == rows and not (tmp_path / "snap").exists()  # nothing changed
+    (newest / "replay.omitted").write_text("{}")  # the repair the message gives
+    with pytest.warns(UserWarning, match="buffer is refilled"):
+        trainer = Trainer.resume(run, progress=False, steps=400)
+    assert trainer.step == 300 and [r["step"] for r in _metrics(trainer.train())] == [
+        r["step"] for r in full
+    ]
+    (run / "checkpoints" / "step_000000400" / "state.json").unlink()
+    with pytest.raises(FileNotFoundError, match=r"lacks state.json.*delete the directory"):
+        Trainer.resume(run, progress=False, steps=500)
 
 
 def test_a_run_killed_before_its_first_checkpoint_starts_again_from_zero(tmp_path):

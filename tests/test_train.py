@@ -112,6 +112,22 @@ def test_cli_train_and_eval_and_plot(tmp_path, capsys):
     out = tmp_path / "curves.png"
     assert main(["plot", str(run), "--out", str(out)]) == 0
     assert out.stat().st_size > 0
+    assert main(["plot", str(run), "--out", str(out), "--metric", "critic_loss"]) == 0
+    assert main(["plot", str(run), "--out", str(out), "--metric", "nosuch"]) == 2
+    assert "no metric 'nosuch'" in capsys.readouterr().err
+    damaged = tmp_path / "damaged"
+    damaged.mkdir()
+    (damaged / "config.json").write_bytes((run / "config.json").read_bytes())
+    text = (run / "metrics.csv").read_text().splitlines()
+    column = text[0].split(",").index("eval_score_norm")
+    rows = [line.split(",") for line in text[1:]]
+    next(r for r in reversed(rows) if r[column])[column] = "abc"
+    (damaged / "metrics.csv").write_text("\n".join([text[0], *map(",".join, rows)]) + "\n")
+    assert main(["plot", str(damaged), "--out", str(out)]) == 2
+    assert "metrics.csv: eval_score_norm 'abc' at step" in capsys.readouterr().err
+    (damaged / "metrics.csv").write_text(text[0] + "\n")  # no evaluation yet
+    assert main(["plot", str(damaged), "--out", str(out)]) == 2
+    assert "nothing to plot: no evaluation logged yet" in capsys.readouterr().err
 
 
 def test_imitation_on_ant_drops_the_contact_forces_by_default_from_the_run_and_its_demos(
@@ -248,6 +264,16 @@ def test_cli_errors(tmp_path, capsys):
     assert "not a run directory" in capsys.readouterr().err
     assert main(["train", "--steps", "0", "--demos", DEMOS]) == 2
     assert "steps must be >= 1" in capsys.readouterr().err
+    # Zeros and negatives are errors, not the default silently (a 0 horizon used to run 1,000).
+    for flags, message in (
+        (["--horizon", "0"], "horizon must be >= 1"),
+        (["--seed", "-1"], "seed must be >= 0"),
+        (["--td3-gamma", "2"], "gamma must be in (0, 1]"),
+        (["--td3-tau", "0"], "tau must be in (0, 1]"),
+    ):
+        assert main(["train", *flags, "--demos", DEMOS, "--no-progress", *out]) == 2
+        assert message in capsys.readouterr().err
+    assert not list((tmp_path / "runs").iterdir())
     with pytest.raises(SystemExit):
         main(["train", "--algo", "gail"])
     with pytest.raises(SystemExit):

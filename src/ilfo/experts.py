@@ -49,6 +49,8 @@ POLICY_FILE, EXPERT_FILE, DEMOS_FILE, CARD_FILE = (
     "demos.npz",
     "card.json",
 )
+EXPERT_FILES = frozenset({POLICY_FILE, EXPERT_FILE, DEMOS_FILE, CARD_FILE})
+"""What an expert directory holds (and an export replaces)."""
 CARD_EVAL_EPISODES = 10
 """Evaluation episodes on a card (its ``eval_return_mean`` and ``eval_return_std``)."""
 EVAL_FIRST_SEED = 1000
@@ -139,6 +141,22 @@ def export_expert(
     return out
 
 
+def _check_replaceable(out: Path) -> None:
+    """Refuse an ``out`` that an export would wrongly replace: a file, or a directory holding
+    anything but an expert's own files (an export replaces the directory whole)."""
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise FileExistsError(f"{out} is a file: the expert directory must be a new directory")
+    others = sorted(p.name for p in out.iterdir() if p.name not in EXPERT_FILES)
+    if others:
+        raise FileExistsError(
+            f"{out} holds other files than an expert's ({', '.join(others[:5])}"
+            f"{', ...' if len(others) > 5 else ''}), which the export would delete: choose a "
+            "new directory, or an expert directory to replace"
+        )
+
+
 def export_expert_with_demos(
     run_dir: str | Path,
     out_dir: str | Path | None,
@@ -156,6 +174,7 @@ def export_expert_with_demos(
     """
     run_dir = Path(run_dir)
     out = Path(out_dir) if out_dir else expert_dir(read_run_config(run_dir)["env"])
+    _check_replaceable(out)
     staging = out.with_name(f".{out.name}.export-tmp")
     shutil.rmtree(staging, ignore_errors=True)
     try:

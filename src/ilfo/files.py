@@ -87,6 +87,9 @@ def read_settings_file(path: str | Path) -> dict[str, Any]:
     """A JSON (or TOML, by its suffix) file of settings, as a dict; clear errors for a missing,
     damaged or non-object file."""
     path = Path(path)
+    if path.is_dir():
+        hint = f": pass {path / 'config.json'}" if (path / "config.json").is_file() else ""
+        raise ValueError(f"{path} is a directory, not a settings file{hint}")
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such settings file")
     try:

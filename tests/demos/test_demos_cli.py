@@ -117,4 +117,4 @@ def test_bad_inputs_are_clear_errors(capsys, tmp_path):
     assert "no demonstration file" in capsys.readouterr().err
     src = str(bundled_demos("Hopper-v5-scripted"))
     assert main(["demos", "convert", src, str(tmp_path / "out.hdf5")]) == 2
-    assert "must end in .npz" in capsys.readouterr().err
+    assert "must be a .npz file" in capsys.readouterr().err

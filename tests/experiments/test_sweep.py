@@ -136,6 +136,8 @@ def test_a_finished_runs_config_json_as_the_spec_config_repeats_it_on_the_sweeps
         ({"variants": {"a__b": {}}}, "variant name"),
         ({"retries": -1}, "retries"),
         ({"config": {"contact_forces": False}}, "none of its envs observe"),
+        ({"env": ("Hopper-v5", "Hoper-v5")}, "unknown environment 'Hoper-v5'"),
+        ({"seed": (-3,)}, "seed must be >= 0"),
     ],
 )
 def test_bad_specs_are_refused_clearly(kwargs, message):
@@ -145,8 +147,12 @@ def test_bad_specs_are_refused_clearly(kwargs, message):
 
 def test_parse_seeds():
     assert parse_seeds(["0-2", "7"]) == (0, 1, 2, 7)
-    with pytest.raises(ValueError, match="neither a seed nor a range"):
+    with pytest.raises(ValueError, match="reversed range"):
         parse_seeds(["3-1"])
+    with pytest.raises(ValueError, match="neither a seed nor a range"):
+        parse_seeds(["1-x"])
+    with pytest.raises(ValueError, match="seeds are >= 0"):
+        parse_seeds(["-3"])
 
 
 def test_manifest_round_trip_and_a_different_spec_refused(tmp_path):
@@ -429,3 +435,6 @@ def test_cli_dry_run_shows_what_only_and_skip_leave_out(tmp_path, capsys):
     fresh = tmp_path / "fresh"
     assert main(["sweep", "run", str(fresh), *axes, "--skip", "Hoper-v5__*"]) != 0
     assert not fresh.exists()  # refused before the sweep directory is made
+    for flag in ("--workers", "--cores-per-run"):
+        assert main(["sweep", "run", str(fresh), *axes, flag, "0"]) != 0
+        assert not fresh.exists()

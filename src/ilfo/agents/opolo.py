@@ -36,7 +36,12 @@ import jax.numpy as jnp
 import optax
 from numpy.typing import ArrayLike
 
-from ilfo.agents._common import Policy, as_float_bound, make_normalizer_setter
+from ilfo.agents._common import (
+    Policy,
+    as_float_bound,
+    check_discount_and_polyak,
+    make_normalizer_setter,
+)
 from ilfo.agents.inverse_dynamics import (
     InverseDynamics,
     InverseDynamicsConfig,
@@ -104,6 +109,7 @@ class OPOLOConfig:
             raise ValueError("idm_pretrain_steps and idm_steps must be >= 0")
         if self.alpha < 0 or self.pi_reg_coef < 0 or self.lr <= 0:
             raise ValueError("alpha and pi_reg_coef must be >= 0, lr positive")
+        check_discount_and_polyak(self.gamma, self.tau)
 
     @classmethod
     def hopper(cls, **overrides: Any) -> OPOLOConfig:

@@ -27,6 +27,7 @@ from numpy.typing import ArrayLike
 from ilfo.agents._common import (
     Policy,
     as_float_bound,
+    check_discount_and_polyak,
     make_normalizer_setter,
     make_optimizer,
     scan_updates,
@@ -94,6 +95,7 @@ class SACConfig:
             raise ValueError(
                 "num_critics, batch_size, init_temperature and reward_scale must be positive"
             )
+        check_discount_and_polyak(self.gamma, self.tau)
         object.__setattr__(self, "actor_hidden", tuple(self.actor_hidden))
         object.__setattr__(self, "critic_hidden", tuple(self.critic_hidden))
 

@@ -32,6 +32,7 @@ from numpy.typing import ArrayLike
 from ilfo.agents._common import (
     Policy,
     as_float_bound,
+    check_discount_and_polyak,
     make_normalizer_setter,
     make_optimizer,
     scan_update_groups,
@@ -132,6 +133,7 @@ class TD3Config:
             raise ValueError(f"loss must be 'pal', 'mse' or 'huber', got {self.loss!r}")
         if self.num_critics < 1 or self.policy_delay < 1 or self.batch_size < 1:
             raise ValueError("num_critics, policy_delay and batch_size must be >= 1")
+        check_discount_and_polyak(self.gamma, self.tau)
         object.__setattr__(self, "actor_hidden", tuple(self.actor_hidden))
         object.__setattr__(self, "critic_hidden", tuple(self.critic_hidden))
 

@@ -190,7 +190,8 @@ def _add_demos_parser(sub: argparse._SubParsersAction) -> None:
         "-n", "--episodes", type=int, default=10, help="episodes to collect (default 10)"
     )
     k.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
-    k.add_argument("--out", required=True, help="ilfo .npz to write")
+    k.add_argument("--out", required=True, help="ilfo .npz to write (new, or --force)")
+    k.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     k.add_argument(
         "--keep-falls",
         action="store_true",
@@ -199,12 +200,22 @@ def _add_demos_parser(sub: argparse._SubParsersAction) -> None:
     k.set_defaults(run=_run_demos_collect)
 
 
+def _check_npz_out(out: Path, force: bool) -> None:
+    """An ilfo .npz to write: its name must say so (numpy would add the suffix), and an
+    existing file is replaced only with --force."""
+    if out.suffix != ".npz":
+        raise ValueError(f"the output must be a .npz file, got {out}")
+    if out.exists() and not force:
+        raise ValueError(f"{out} exists: pass --force to overwrite it")
+
+
 def _run_demos_collect(args: argparse.Namespace) -> int:
     from ilfo.experts import collect_demos, load_expert
 
     expert = load_expert(args.expert)
     if args.env and args.env != expert.config.env:
         raise ValueError(f"the expert is for {expert.config.env}, not {args.env}")
+    _check_npz_out(Path(args.out), args.force)
     episodes = collect_demos(
         expert, args.episodes, args.out, first_seed=args.seed, skip_falls=not args.keep_falls
     )
@@ -252,10 +263,7 @@ def _run_demos_info(args: argparse.Namespace) -> int:
 
 def _run_demos_convert(args: argparse.Namespace) -> int:
     out = Path(args.output)
-    if out.suffix != ".npz":
-        raise ValueError(f"OUT must end in .npz, got {out}")
-    if out.exists() and not args.force:
-        raise ValueError(f"{out} exists: pass --force to overwrite it")
+    _check_npz_out(out, args.force)
     data = demos.load_any(args.input)
     env_id = args.env_id or data.env_id
     if not env_id:
@@ -311,12 +319,12 @@ def _run_label(args: argparse.Namespace) -> int:
     from ilfo.config import overrides_from_args
     from ilfo.labelling import LabelConfig, label_dataset
 
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {args.workers}")
     oops = OOPSConfig(**overrides_from_args(args, OOPSConfig, prefix="oops"))
     config = LabelConfig(oops=oops, **overrides_from_args(args, LabelConfig))
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     workers = args.workers or cpus or 1
-    if workers < 1:
-        raise ValueError(f"--workers must be >= 1, got {workers}")
     with tqdm(unit="episode", desc="labelling") as bar:
         summary = label_dataset(
             args.dataset,

@@ -148,6 +148,7 @@ def _run_sweep(args: argparse.Namespace) -> int:
     runs = sweep.runs if sweep is not None else expand(spec)
     # Chosen before a new sweep directory is made: a misspelt pattern leaves nothing behind.
     chosen = select_runs([run.name for run in runs], args.only, args.skip)
+    make_backend = _backend_factory(args)  # likewise bad --workers or --cores-per-run
     if sweep is None:
         if args.dry_run:
             for run in runs:
@@ -164,7 +165,7 @@ def _run_sweep(args: argparse.Namespace) -> int:
         for status in statuses:
             if status.state == "failed":
                 record_attempt(sweep, status.name, "reset")
-    backend = _backend_factory(args)()
+    backend = make_backend()
     print(f"sweep {root}: {len(sweep.runs)} runs, {backend.slots} at once ({args.backend})")
     if len(chosen) < len(sweep.runs):
         print(

@@ -109,7 +109,7 @@ def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
 def _run_expert_train(args: argparse.Namespace) -> int:
     from ilfo.agents import SACConfig
     from ilfo.experts import expert_reward_scale
-    from ilfo.training import TrainConfig, Trainer
+    from ilfo.training import TrainConfig, Trainer, read_run_config
 
     run_dir = Path(args.run_dir or Path("runs") / "experts" / f"{args.env}__sac__{args.seed}")
     if args.resume:
@@ -121,6 +121,9 @@ def _run_expert_train(args: argparse.Namespace) -> int:
             )
         if args.gamma is not None:
             raise ValueError("--gamma cannot change on --resume: the run keeps its own")
+        recorded = read_run_config(run_dir).get("env")
+        if recorded != args.env:
+            raise ValueError(f"{run_dir} trains an expert for {recorded}, not {args.env}")
         trainer = Trainer.resume(run_dir, progress=not args.no_progress, steps=args.steps)
     else:
         if (run_dir / "config.json").exists():
@@ -138,7 +141,7 @@ def _run_expert_train(args: argparse.Namespace) -> int:
             best_by="return",
             healthy_angle_range=args.healthy_angle_range,  # a list: TrainConfig makes it a tuple
             seed=args.seed,
-            steps=args.steps or 1_000_000,
+            steps=1_000_000 if args.steps is None else args.steps,
             eval_every=args.eval_every,
             eval_episodes=args.eval_episodes,
             checkpoint_every=args.checkpoint_every,
@@ -151,7 +154,7 @@ def _run_expert_train(args: argparse.Namespace) -> int:
     print(f"run directory: {run_dir}")
     print(trainer.checkpoint_plan())
     trainer.train()
-    print(f"done: {json.dumps(trainer.last_eval)}")
+    print(f"done: {json.dumps(trainer.last_eval) if trainer.last_eval else 'no evaluation yet'}")
     return 0
 
 

@@ -42,6 +42,14 @@ x 6), and how many columns those are. The paper's v2 versions of these tasks car
 zeros (mujoco-py >= 2.0 left them unfilled); ``make_env(..., contact_forces=False)`` drops them."""
 
 
+def env_spec(env_id: str) -> gym.envs.registration.EnvSpec:
+    """gymnasium's registration of ``env_id``, or a ValueError listing the supported ids."""
+    try:
+        return gym.spec(env_id)
+    except gym.error.Error:
+        raise ValueError(f"unknown environment {env_id!r}; supported: {SUPPORTED_ENVS}") from None
+
+
 def make_env(
     env_id: str,
     fixed_horizon: bool = True,
@@ -78,11 +86,8 @@ def make_env(
             ``contact_forces=False`` for an env without contact forces in its observations.
         ImportError: A Minitaur id without PyBullet (``pip install -e ".[bullet]"``).
     """
-    try:
-        spec = gym.spec(env_id)
-    except gym.error.Error as err:
-        raise ValueError(f"unknown environment {env_id!r}; supported: {SUPPORTED_ENVS}") from err
-    limit = horizon or spec.max_episode_steps or 1000
+    spec = env_spec(env_id)
+    limit = (spec.max_episode_steps or 1000) if horizon is None else horizon
     if limit < 1:
         raise ValueError(f"horizon must be >= 1, got {horizon}")
     kwargs: dict[str, Any] = {}

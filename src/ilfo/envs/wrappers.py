@@ -40,9 +40,12 @@ class TimeFeature(gym.ObservationWrapper):
 
     def __init__(self, env: gym.Env, horizon: int | None = None) -> None:
         super().__init__(env)
-        horizon = horizon or (env.spec.max_episode_steps if env.spec else None)
-        if not horizon or horizon < 1:
+        if horizon is None:
+            horizon = env.spec.max_episode_steps if env.spec else None
+        if horizon is None:
             raise ValueError("TimeFeature needs a horizon: pass one, or wrap a time-limited env")
+        if horizon < 1:
+            raise ValueError(f"TimeFeature's horizon must be >= 1, got {horizon}")
         space = env.observation_space
         if not isinstance(space, gym.spaces.Box) or len(space.shape) != 1:
             raise ValueError(f"TimeFeature needs a flat Box observation space, got {space}")

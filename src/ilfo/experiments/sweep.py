@@ -145,13 +145,15 @@ def parse_seeds(items: Sequence[str | int]) -> tuple[int, ...]:
         try:
             if dash and low:
                 first, last = int(low), int(high)
-                if last < first:
-                    raise ValueError
-                seeds.extend(range(first, last + 1))
             else:
-                seeds.append(int(text))
+                first = last = int(text)
         except ValueError:
             raise ValueError(f"seeds: {text!r} is neither a seed nor a range like 0-4") from None
+        if first < 0:
+            raise ValueError(f"seeds: {text!r}: seeds are >= 0")
+        if last < first:
+            raise ValueError(f"seeds: {text!r} is a reversed range (write {last}-{first})")
+        seeds.extend(range(first, last + 1))
     return tuple(seeds)
 
 
@@ -180,7 +182,11 @@ def expand(spec: SweepSpec) -> list[SweepRun]:
     seed-major order so that a partly done sweep covers every cell with its first seeds."""
     from ilfo.algos import PART_CONFIGS, recipe
     from ilfo.envs import CONTACT_FORCE_DIMS
+    from ilfo.envs.make import env_spec
     from ilfo.training import config_from_settings
+
+    for env in spec.env:  # a misspelt id fails now, not in every one of its runs
+        env_spec(env)
 
     variants: list[tuple[str | None, Mapping[str, Any]]] = list(spec.variants.items()) or [
         (None, {})

@@ -162,6 +162,10 @@ class TrainConfig:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.start_steps is not None and self.start_steps < 0:
             raise ValueError(f"start_steps must be >= 0, got {self.start_steps}")
+        if self.seed < 0:
+            raise ValueError(f"seed must be >= 0, got {self.seed}")
+        if self.horizon is not None and self.horizon < 1:
+            raise ValueError(f"horizon must be >= 1 (or unset: the env's own), got {self.horizon}")
         minutes = self.checkpoint_minutes
         if isinstance(minutes, bool) or not isinstance(minutes, numbers.Real):
             raise ValueError(f"checkpoint_minutes must be a number, got {minutes!r}")

@@ -39,7 +39,7 @@ from ilfo.training.build import (
 )
 from ilfo.training.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 from ilfo.training.config import TrainConfig, config_from_dict
-from ilfo.training.metrics import MetricsLog, truncate_metrics
+from ilfo.training.metrics import MetricsLog, read_metrics, truncate_metrics
 from ilfo.training.plots import plot_runs
 from ilfo.training.rollout import (
     agent_observation,
@@ -56,8 +56,10 @@ from ilfo.training.run_dir import (
     DEMOS_RECORD_FILE,
     FINAL_POLICY_FILE,
     RunLock,
+    damaged_checkpoint_message,
     fault_point,
     latest_checkpoint,
+    newest_checkpoint_is_damaged,
     read_demos_record,
     read_run_config,
     remove_incomplete_checkpoints,
@@ -155,7 +157,8 @@ class Trainer:
             self._loop()
             self._metrics.close()
             self._save_policy(FINAL_POLICY_FILE)
-            plot_runs([self.run_dir], self.run_dir / "learning_curve.png")
+            if any(row.get("eval_score") for row in read_metrics(self.run_dir)):
+                plot_runs([self.run_dir], self.run_dir / "learning_curve.png")
         finally:
             if self._metrics is not None:
                 self._metrics.close()
@@ -521,6 +524,9 @@ class Trainer:
             config = config_from_dict(raw, run_dir / CONFIG_FILE)
             trainer = cls(config, run_dir, progress=progress, hooks=hooks)
             checkpoint = latest_checkpoint(run_dir)
+            damaged = newest_checkpoint_is_damaged(run_dir)
+            if damaged is not None:
+                raise FileNotFoundError(damaged_checkpoint_message(damaged))
             if checkpoint is None:
                 warnings.warn(
                     f"{run_dir} has no complete checkpoint yet: the run starts again from step 0",

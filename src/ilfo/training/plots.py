@@ -2,18 +2,21 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from ilfo.training.metrics import read_metrics
+from ilfo.training.run_dir import CONFIG_FILE, read_run_config
 
 
 def plot_runs(run_dirs: list[Path], out: Path, metric: str | None = None) -> Path:
-    """Evaluation curves of runs, grouped by env and algo: mean over seeds with min-max band.
+    """Curves of runs, grouped by env and algo: mean over seeds with min-max band.
 
-    ``metric`` defaults to the normalised score where demos gave a return, else the raw score.
+    ``metric`` is a metrics.csv column, plotted over the rows that log it; by default the
+    normalised evaluation score where demos gave a return, else the raw one. Raises ValueError
+    for a column the runs do not log, a value that is not a number (naming the file), or runs
+    with no value to plot (no evaluation yet).
     """
     import matplotlib
 
@@ -23,15 +26,24 @@ def plot_runs(run_dirs: list[Path], out: Path, metric: str | None = None) -> Pat
     groups: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
     chosen = metric
     for run_dir in run_dirs:
-        cfg = json.loads((Path(run_dir) / "config.json").read_text())
-        rows = [r for r in read_metrics(run_dir) if r.get("eval_score")]
+        cfg = read_run_config(run_dir)
+        if not isinstance(cfg.get("env"), str) or not isinstance(cfg.get("algo"), str):
+            raise ValueError(f"{Path(run_dir) / CONFIG_FILE} names no env and algo")
+        all_rows = read_metrics(run_dir)
+        if metric is not None and all_rows and metric not in all_rows[0]:
+            numeric = [k for k in all_rows[0] if k not in ("step", "episode")]
+            raise ValueError(f"no metric {metric!r} in {run_dir}; choose one of {numeric}")
+        rows = [r for r in all_rows if r.get(metric or "eval_score")]
         if not rows:
             continue
         name = chosen or ("eval_score_norm" if rows[0].get("eval_score_norm") else "eval_score")
         chosen = name
-        steps = np.array([float(r["step"]) for r in rows])
-        values = np.array([float(r[name]) for r in rows])
+        steps = _column(rows, "step", run_dir)
+        values = _column(rows, name, run_dir)
         groups.setdefault(f"{cfg['env']} {cfg['algo']}", []).append((steps, values))
+    if not groups:
+        where = ", ".join(map(str, run_dirs))
+        raise ValueError(f"nothing to plot: no {metric or 'evaluation'} logged yet in {where}")
     fig, ax = plt.subplots(figsize=(6, 4))
     for label, curves in groups.items():
         length = min(len(s) for s, _ in curves)
@@ -50,3 +62,23 @@ def plot_runs(run_dirs: list[Path], out: Path, metric: str | None = None) -> Pat
     fig.savefig(out, dpi=120)
     plt.close(fig)
     return out
+
+
+def _column(rows: list[dict[str, str]], name: str, run_dir: Path) -> np.ndarray:
+    """Column ``name`` of metrics rows as floats; a ValueError names the file and the step."""
+    try:
+        return np.array([float(r[name]) for r in rows])
+    except (TypeError, ValueError):
+        bad = next(r for r in rows if not _is_float(r[name]))
+        raise ValueError(
+            f"{Path(run_dir) / 'metrics.csv'}: {name} {bad[name]!r} at step {bad.get('step')} "
+            "is not a number (a damaged file?)"
+        ) from None
+
+
+def _is_float(text: str | None) -> bool:
+    try:
+        float(text)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return False
+    return True

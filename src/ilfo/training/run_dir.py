@@ -135,6 +135,52 @@ def checkpoint_steps(run_dir: str | Path) -> list[tuple[int, Path]]:
     return sorted(found)
 
 
+def damaged_checkpoints(run_dir: str | Path) -> list[Path]:
+    """The run's ``step_*`` checkpoint directories that lack a file, oldest first. Checkpoints
+    are renamed into place only once written, so these are checkpoints someone removed files
+    from (typically ``replay.npz``, to free disk), not half-written ones."""
+    root = Path(run_dir) / CHECKPOINTS_DIR
+    if not root.is_dir():
+        return []
+    complete = {path for _, path in checkpoint_steps(run_dir)}
+    damaged = [
+        path
+        for path in root.iterdir()
+        if _STEP_DIR.fullmatch(path.name) and path.is_dir() and path not in complete
+    ]
+    return sorted(damaged, key=_step)
+
+
+def _step(checkpoint: Path) -> int:
+    """The step of a ``step_N`` checkpoint directory."""
+    return int(checkpoint.name.removeprefix("step_"))
+
+
+def newest_checkpoint_is_damaged(run_dir: str | Path) -> Path | None:
+    """The newest ``step_*`` directory where it is a damaged checkpoint (``damaged_checkpoints``)
+    newer than every complete one, else None: resuming from an older checkpoint would drop the
+    steps and metrics logged after it."""
+    damaged, latest = damaged_checkpoints(run_dir), latest_checkpoint(run_dir)
+    if damaged and (latest is None or _step(damaged[-1]) > _step(latest)):
+        return damaged[-1]
+    return None
+
+
+def damaged_checkpoint_message(path: Path) -> str:
+    """What is wrong with damaged checkpoint ``path`` and how to continue from it."""
+    missing = [name for name in CHECKPOINT_FILES if not (path / name).is_file()]
+    if not missing:  # only the replay buffer is gone
+        return (
+            f"checkpoint {path} has no {REPLAY_FILE} (removed?): put it back, or continue "
+            f"without it as from a snapshot (the buffer refilled by the policy) after `touch "
+            f"{path / REPLAY_OMITTED}`"
+        )
+    return (
+        f"checkpoint {path} lacks {', '.join(missing)}: put the files back, or delete the "
+        "directory to continue from an older checkpoint"
+    )
+
+
 def latest_checkpoint(run_dir: str | Path) -> Path | None:
     """The newest complete checkpoint directory of a run, or None."""
     steps = checkpoint_steps(run_dir)
@@ -142,13 +188,18 @@ def latest_checkpoint(run_dir: str | Path) -> Path | None:
 
 
 def remove_incomplete_checkpoints(run_dir: str | Path) -> None:
-    """Delete what a killed checkpoint write left: ``.tmp_step_*`` directories, and the stale
-    ``latest`` pointer of runs written before checkpoints were found by scanning."""
+    """Delete what a killed checkpoint write left: ``.tmp_step_*`` directories, checkpoints
+    older than the newest complete one whose removal was cut short, and the stale ``latest``
+    pointer of runs written before checkpoints were found by scanning."""
     root = Path(run_dir) / CHECKPOINTS_DIR
     if not root.is_dir():
         return
     for path in root.glob(".tmp_step_*"):
         shutil.rmtree(path, ignore_errors=True)
+    latest = latest_checkpoint(run_dir)
+    for path in damaged_checkpoints(run_dir):
+        if latest is not None and _step(path) < _step(latest):
+            shutil.rmtree(path, ignore_errors=True)
     for name in ("latest", ".latest.tmp"):
         (root / name).unlink(missing_ok=True)
 
@@ -278,6 +329,9 @@ def snapshot_run(run_dir: str | Path, out: str | Path) -> Path:
     run_dir, out = Path(run_dir), Path(out)
     read_run_config(run_dir)  # a run directory, or a clear error
     with RunLock(run_dir):  # not while a trainer writes it: a checkpoint could be half-replaced
+        damaged = newest_checkpoint_is_damaged(run_dir)
+        if damaged is not None:
+            raise FileNotFoundError(damaged_checkpoint_message(damaged))
         checkpoint = latest_checkpoint(run_dir)
         if checkpoint is None:
             raise FileNotFoundError(f"{run_dir} has no complete checkpoint to snapshot yet")
