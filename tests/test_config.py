@@ -159,6 +159,19 @@ def test_mismatched_or_malformed_sub_configs_are_clear_errors():
         TrainConfig(td3={"batch": 3})
     with pytest.raises(TypeError, match="td3 must be a TD3Config"):
         TrainConfig(td3=3)
+    # A value of the wrong type (a hand-edited file) names the field and the type it needs.
+    with pytest.raises(ValueError, match=r"td3.batch_size must be int, got 'big' \(str\)"):
+        TrainConfig(td3={"batch_size": "big"})
+    with pytest.raises(ValueError, match=r"td3.critic_hidden must be tuple\[int, ...\]"):
+        TrainConfig(td3={"critic_hidden": [256, "x"]})
+    with pytest.raises(ValueError, match=r"oops.reg must be float, got True"):
+        TrainConfig(oops={"reg": True})
+    with pytest.raises(ValueError, match=r"oops.metric must be Literal"):
+        TrainConfig(oops={"metric": "manhattan"})
+    tolerant = TrainConfig(td3={"tau": 1, "critic_hidden": [64, 64], "critic_grad_clip": None})
+    assert tolerant.td3.tau == 1 and tolerant.td3.critic_hidden == (64, 64)
+    with pytest.raises(ValueError, match=r"oops.max_iter must be int, got None"):
+        TrainConfig(oops={"max_iter": None})
 
 
 def test_the_algo_names_are_the_registry():

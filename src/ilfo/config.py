@@ -11,6 +11,7 @@ import ast
 import dataclasses
 import inspect
 import itertools
+import numbers
 import textwrap
 import types
 import typing
@@ -57,7 +58,50 @@ def dataclass_from_dict(cls: type[T], value: Any, name: str) -> T | None:
     unknown = sorted(set(value) - known)
     if unknown:
         raise ValueError(f"{name}: {cls.__name__} has no field(s) {', '.join(unknown)}")
+    hints = typing.get_type_hints(cls)
+    for key, item in value.items():
+        if not _matches(item, hints[key]):
+            raise ValueError(
+                f"{name}.{key} must be {_type_text(hints[key])}, got {item!r} "
+                f"({type(item).__name__})"
+            )
     return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in value.items()})
+
+
+def _matches(value: Any, hint: Any) -> bool:
+    """Whether ``value`` (as JSON or flags give it: lists for tuples) fits type ``hint``, for
+    the types configs use; others (and nested dataclasses, checked on their own) pass."""
+    origin, args = get_origin(hint), get_args(hint)
+    if hint is Any:
+        return True
+    if origin in (typing.Union, types.UnionType):
+        return any(_matches(value, arg) for arg in args)
+    if origin is Literal:
+        return value in args
+    if hint is type(None):
+        return value is None
+    if hint is bool:
+        return isinstance(value, bool)
+    if hint is int:
+        return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+    if hint is float:
+        return isinstance(value, numbers.Real) and not isinstance(value, bool)
+    if hint is str:
+        return isinstance(value, str)
+    if origin is tuple:
+        if not isinstance(value, (list, tuple)):
+            return False
+        if len(args) == 2 and args[1] is Ellipsis:
+            return all(_matches(item, args[0]) for item in value)
+        return len(value) == len(args) and all(map(_matches, value, args))
+    return True
+
+
+def _type_text(hint: Any) -> str:
+    """A type as an error message names it (``float | None``, ``tuple[int, ...]``)."""
+    if isinstance(hint, type) and get_origin(hint) is None:
+        return hint.__name__
+    return str(hint).replace("typing.", "")
 
 
 def flag_name(field_name: str, prefix: str = "") -> str:
