@@ -39,7 +39,7 @@ from ilfo.training.build import (
 )
 from ilfo.training.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 from ilfo.training.config import TrainConfig, config_from_dict
-from ilfo.training.metrics import MetricsLog, read_metrics, truncate_metrics
+from ilfo.training.metrics import MetricsLog, truncate_metrics
 from ilfo.training.plots import plot_runs
 from ilfo.training.rollout import (
     agent_observation,
@@ -157,7 +157,7 @@ class Trainer:
             self._loop()
             self._metrics.close()
             self._save_policy(FINAL_POLICY_FILE)
-            if any(row.get("eval_score") for row in read_metrics(self.run_dir)):
+            if self.last_eval:  # an evaluation was logged: there is a curve to draw
                 plot_runs([self.run_dir], self.run_dir / "learning_curve.png")
         finally:
             if self._metrics is not None:
