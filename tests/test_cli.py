@@ -30,6 +30,8 @@ def test_reward_errors_are_clear(capsys, tmp_path):
     assert "no demonstration file" in capsys.readouterr().err
     assert main(["reward", "--expert", "99"]) == 2
     assert "out of range" in capsys.readouterr().err
+    assert main(["reward", "--rewarder", "pwil", "--solver", "emd", "--reg", "0.1"]) == 2
+    assert "--solver, --reg: OOPS settings" in capsys.readouterr().err
 
 
 def test_reward_scores_ant_demos_without_contact_forces_by_default(capsys, tmp_path):
@@ -75,3 +77,15 @@ def test_stop_signals_interrupt_even_where_sigint_was_ignored():
         assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN  # restored on the way out
     finally:
         signal.signal(signal.SIGINT, before)
+
+
+def test_a_bad_flag_is_not_buried_under_the_full_usage(capsys):
+    with pytest.raises(SystemExit) as stopped:
+        main(["train", "--algo", "nope"])
+    assert stopped.value.code == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == "usage: ilfo train [options]  (all of them: ilfo train --help)"
+    assert "invalid choice: 'nope'" in err[1] and len(err) == 2
+    with pytest.raises(SystemExit):  # a short usage is shown as it is
+        main(["demos", "info"])
+    assert capsys.readouterr().err.startswith("usage: ilfo demos info [-h] [--json] file")

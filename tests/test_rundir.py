@@ -454,7 +454,11 @@ def test_a_snapshot_taken_mid_refill_keeps_refilling(tmp_path):
     out = tmp_path / "carried"
     from ilfo.training.run_dir import snapshot_run
 
+    with pytest.raises(ValueError, match="inside"):  # a copy into what it copies
+        snapshot_run(run, run / "carried")
     snapshot_run(run, out)
+    with pytest.raises(FileExistsError):
+        snapshot_run(run, out)
     with pytest.warns(UserWarning, match="refilled"):
         trainer = Trainer.resume(out, progress=False, steps=500)
     trainer.train()  # stops at 500, inside the refill (it lasts to 600)

@@ -31,6 +31,16 @@ def write_json_atomic(path: str | Path, value: Any) -> None:
     os.replace(tmp, path)
 
 
+def check_new_copy_dir(source: str | Path, out: str | Path) -> None:
+    """Refuse ``out`` as the directory for a copy of ``source``: FileExistsError where it
+    exists, ValueError where it lies inside ``source`` (the copy would land in what it copies)."""
+    source, out = Path(source).resolve(), Path(out).resolve()
+    if out.exists():
+        raise FileExistsError(f"{out} exists: choose a new directory for the copy")
+    if out.is_relative_to(source):
+        raise ValueError(f"{out} is inside {source}: choose a directory outside it")
+
+
 def file_sha256(path: str | Path) -> str:
     """The sha256 of a file's bytes, hex (read in 1 MiB blocks: a demo file can be tens of MB)."""
     digest = hashlib.sha256()

@@ -117,11 +117,13 @@ def test_cli_and_bad_input(tmp_path, capsys):
     demos.save(data, _episodes(seed=4), "Hopper-v5")
     args = ["label", str(data), "--demos", str(demo_path), "--out", str(tmp_path / "o.npz")]
     assert main([*args, "--squashing", "linear", "--workers", "1", "--oops-reg", "0.1"]) == 0
-    assert "3 episodes" in capsys.readouterr().out
+    captured = capsys.readouterr()
+    assert "3 episodes" in captured.out and "labelling" in captured.err  # the progress bar
     wide = tmp_path / "wide.npz"
     demos.save(wide, [Episode(np.zeros((5, 7)))], "Hopper-v5")
     assert main(["label", str(data), "--demos", str(wide), "--out", str(tmp_path / "x.npz")]) == 2
-    assert "7-dim observations" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "7-dim observations" in err and "labelling" not in err  # no bar before the error
     junk = tmp_path / "junk.npz"
     junk.write_bytes(b"not a zip")
     assert main(["label", str(junk), "--demos", str(demo_path), "--out", str(tmp_path / "y")]) == 2

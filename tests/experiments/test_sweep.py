@@ -238,6 +238,9 @@ def test_snapshot_keeps_checkpoints_without_buffers_and_continues_as_a_sweep(tmp
     assert not copy.run_dir(unstarted).exists()
     with pytest.raises(FileExistsError):
         snapshot_sweep(sweep.root, tmp_path / "copy")
+    with pytest.raises(ValueError, match="inside"):  # a copy into what it copies
+        snapshot_sweep(sweep.root, sweep.root / "copy")
+    assert not (sweep.root / "copy").exists()
 
 
 class _FakeJob:
@@ -438,3 +441,24 @@ def test_cli_dry_run_shows_what_only_and_skip_leave_out(tmp_path, capsys):
     for flag in ("--workers", "--cores-per-run"):
         assert main(["sweep", "run", str(fresh), *axes, flag, "0"]) != 0
         assert not fresh.exists()
+
+
+def test_cli_dry_run_on_an_existing_sweep_checks_the_spec_as_the_run_would(tmp_path, capsys):
+    from ilfo.cli import main
+
+    root = tmp_path / "sweep"
+    spec_file = tmp_path / "spec.json"
+    spec_file.write_text(json.dumps(SweepSpec(env=("Hopper-v5",), config=TINY).to_dict()))
+    assert main(["sweep", "run", str(root), "--spec", str(spec_file), "--dry-run"]) == 0
+    assert not root.exists()
+    create_sweep(root, SweepSpec(env=("Hopper-v5",), config=TINY))
+    # Another axis: the dry run refuses what the real command would refuse, and writes nothing.
+    more = ["--spec", str(spec_file), "--seeds", "0-1", "--dry-run"]
+    assert main(["sweep", "run", str(root), *more]) != 0
+    assert "holds another sweep" in capsys.readouterr().err
+    assert open_sweep(root).spec.seed == (0,)
+    # The same spec, or none: the sweep as it is, with each run's state.
+    for given in (["--spec", str(spec_file)], []):
+        assert main(["sweep", "run", str(root), *given, "--dry-run"]) == 0
+        lines = capsys.readouterr().out.splitlines()
+        assert lines == ["Hopper-v5__oops-td3__demos1__0  pending"]

@@ -4,12 +4,12 @@ demos info / convert / collect, label; ``experiments``: sweep run / status, repo
 
 from __future__ import annotations
 
-import argparse
 import sys
 import warnings
 from collections.abc import Sequence
 from typing import TextIO
 
+from ilfo.cli._common import Parser
 from ilfo.cli._common import _command as _command  # re-exported: ilfo.cli._command
 from ilfo.cli.data import _add_demos_parser, _add_label_parser, _add_reward_parser
 from ilfo.cli.experiments import _add_report_parser, _add_reproduce_parser, _add_sweep_parser
@@ -27,7 +27,7 @@ __all__ = ["main"]
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``ilfo`` console script."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(  # its subcommands' parsers are of its class
         prog="ilfo",
         description="Imitation learning from observation (OOPS and its peers).",
         epilog="Compiled programs are cached in ~/.cache/ilfo/jax ($XDG_CACHE_HOME/ilfo/jax), so "

@@ -1,8 +1,9 @@
-"""What the commands share: how to tell the user to start ``ilfo`` again, and how a long
-command is stopped."""
+"""What the commands share: the parser, how to tell the user to start ``ilfo`` again, and how
+a long command is stopped."""
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import shlex
 import shutil
@@ -10,7 +11,21 @@ import signal
 import sys
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
+
+USAGE_LINES_SHOWN_WITH_AN_ERROR = 6
+"""A longer usage (``ilfo train``'s is 100+ lines) is replaced by a pointer to ``--help``."""
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse's parser, except that a bad argument is not buried under a long usage."""
+
+    def error(self, message: str) -> NoReturn:
+        usage = self.format_usage()
+        if usage.count("\n") > USAGE_LINES_SHOWN_WITH_AN_ERROR:
+            usage = f"usage: {self.prog} [options]  (all of them: {self.prog} --help)\n"
+        sys.stderr.write(usage)
+        self.exit(2, f"{self.prog}: error: {message}\n")
 
 
 def _command() -> str:

@@ -7,6 +7,7 @@ import json
 import time
 from dataclasses import fields
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -39,26 +40,26 @@ def _add_reward_parser(sub: argparse._SubParsersAction) -> None:
     docs = {f.name: (f.default, f.type) for f in fields(OOPSConfig)}
     p.add_argument(
         "--solver",
-        default=docs["solver"][0],
+        default=None,
         choices=["sinkhorn", "emd", "greedy"],
         help=f"OOPS coupling (default {docs['solver'][0]})",
     )
     p.add_argument(
         "--metric",
-        default=docs["metric"][0],
+        default=None,
         choices=["sqrt_euclidean", "euclidean", "sqeuclidean", "cosine"],
         help=f"OOPS ground cost (default {docs['metric'][0]})",
     )
     p.add_argument(
         "--atoms",
-        default=docs["atoms"][0],
+        default=None,
         choices=["transitions", "states"],
         help=f"OOPS atoms: (s, s') or s (default {docs['atoms'][0]})",
     )
     p.add_argument(
         "--reg",
         type=float,
-        default=docs["reg"][0],
+        default=None,
         help=f"Sinkhorn lambda (default {docs['reg'][0]})",
     )
     p.add_argument(
@@ -97,11 +98,16 @@ def _run_reward(args: argparse.Namespace) -> int:
             if not 0 <= i < len(episodes):
                 raise ValueError(f"learner {i} out of range: the file has {len(episodes)}")
             learners.append((f"episode {i}", episodes[i]))
+    # None: not given (the OOPS default); PWIL has settings of its own, so these are refused.
+    oops_flags = {name: getattr(args, name) for name in ("solver", "metric", "atoms", "reg")}
+    given = {name: value for name, value in oops_flags.items() if value is not None}
     if args.rewarder == "pwil":
+        if given:
+            flags = ", ".join(f"--{name}" for name in given)
+            raise ValueError(f"{flags}: OOPS settings, which --rewarder pwil does not use")
         rewarder = PWIL([expert])
     else:
-        cfg = OOPSConfig(solver=args.solver, metric=args.metric, atoms=args.atoms, reg=args.reg)
-        rewarder = OOPS([expert], cfg)
+        rewarder = OOPS([expert], OOPSConfig(**given))
     if not args.json:
         space = " (states without the contact forces)" if dropped else ""
         print(f"{data.env_id} demos from {path}: expert = episode {args.expert}{space}")
@@ -325,7 +331,15 @@ def _run_label(args: argparse.Namespace) -> int:
     config = LabelConfig(oops=oops, **overrides_from_args(args, LabelConfig))
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     workers = args.workers or cpus or 1
-    with tqdm(unit="episode", desc="labelling") as bar:
+    # The bar appears with the first labelled episode, not before the inputs are checked.
+    bars: list[Any] = []
+
+    def advance(episodes: int) -> None:
+        if not bars:
+            bars.append(tqdm(unit="episode", desc="labelling"))
+        bars[0].update(episodes)
+
+    try:
         summary = label_dataset(
             args.dataset,
             args.demos,
@@ -334,8 +348,11 @@ def _run_label(args: argparse.Namespace) -> int:
             num_demos=args.num_demos,
             env_id=args.env_id,
             workers=workers,
-            on_progress=bar.update,
+            on_progress=advance,
         )
+    finally:
+        for bar in bars:
+            bar.close()
     print(
         f"wrote {summary.out} ({summary.format}): {summary.episodes} episodes, "
         f"{summary.transitions} transitions in {summary.seconds:.1f} s with {workers} workers; "

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ilfo.cli._common import stop_signals_interrupt
+from ilfo.cli._common import Parser, stop_signals_interrupt
 from ilfo.config import overrides_from_args
 
 
@@ -97,7 +97,7 @@ def _train_settings(rest: list[str]) -> dict[str, Any]:
     from ilfo.cli.train import _add_train_parser, part_flags, settings_from_args
     from ilfo.training import TrainConfig
 
-    parser = argparse.ArgumentParser(prog="ilfo sweep run DIR [ilfo train flags]")
+    parser = Parser(prog="ilfo sweep run DIR [ilfo train flags]")
     _add_train_parser(parser.add_subparsers())
     args = parser.parse_args(["train", *rest])
     if args.resume is not None:
@@ -134,6 +134,7 @@ def _run_sweep(args: argparse.Namespace) -> int:
     from ilfo.experiments import (
         create_sweep,
         expand,
+        matching_sweep,
         open_sweep,
         progress_line,
         record_attempt,
@@ -144,23 +145,25 @@ def _run_sweep(args: argparse.Namespace) -> int:
     rest = list(args.rest)
     spec = _spec_from_args(args, rest)
     root = Path(args.dir)
-    sweep = open_sweep(root) if spec is None else None
+    # An existing sweep given a spec must be the same sweep, --dry-run or not.
+    sweep = open_sweep(root) if spec is None else matching_sweep(root, spec)
     runs = sweep.runs if sweep is not None else expand(spec)
     # Chosen before a new sweep directory is made: a misspelt pattern leaves nothing behind.
     chosen = select_runs([run.name for run in runs], args.only, args.skip)
     make_backend = _backend_factory(args)  # likewise bad --workers or --cores-per-run
-    if sweep is None:
-        if args.dry_run:
+    if args.dry_run:
+        if sweep is None:
             for run in runs:
                 print(run.name if run.name in chosen else f"{run.name}  (left out)")
-            return 0
-        sweep = create_sweep(root, spec)
-    statuses = sweep.statuses()
-    if args.dry_run:
-        for status in statuses:
-            left_out = "" if status.name in chosen else "  (left out)"
-            print(f"{status.name}  {status.state}{left_out}")
+        else:
+            for status in sweep.statuses():
+                left_out = "" if status.name in chosen else "  (left out)"
+                print(f"{status.name}  {status.state}{left_out}")
         return 0
+    if spec is not None:  # a new sweep, or the same one with other retries
+        sweep = create_sweep(root, spec)
+    assert sweep is not None
+    statuses = sweep.statuses()
     if args.retry_failed:
         for status in statuses:
             if status.state == "failed":

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from ilfo.files import read_settings_file, write_json_atomic
+from ilfo.files import check_new_copy_dir, read_settings_file, write_json_atomic
 
 MANIFEST_FILE = "sweep.json"
 RUNS_DIR = "runs"
@@ -303,13 +303,8 @@ def create_sweep(root: str | Path, spec: SweepSpec) -> Sweep:
     root = Path(root)
     runs = tuple(expand(spec))
     manifest = root / MANIFEST_FILE
-    if manifest.exists():
-        existing = open_sweep(root)
-        if dataclasses.replace(existing.spec, retries=spec.retries) != spec:
-            raise ValueError(
-                f"{root} holds another sweep (its spec differs from this one); continue it "
-                "with `ilfo sweep run` and no spec, or choose a new directory"
-            )
+    existing = matching_sweep(root, spec)
+    if existing is not None:
         if existing.spec.retries != spec.retries:  # the one setting a sweep may change
             raw = read_settings_file(manifest)
             raw["spec"]["retries"] = spec.retries
@@ -326,6 +321,21 @@ def create_sweep(root: str | Path, spec: SweepSpec) -> Sweep:
     }
     write_json_atomic(manifest, record)
     return Sweep(root, spec, runs)
+
+
+def matching_sweep(root: str | Path, spec: SweepSpec) -> Sweep | None:
+    """The sweep already in ``root`` if its spec is ``spec`` (``retries`` aside), None if
+    ``root`` holds no sweep; a ValueError if it holds another one."""
+    root = Path(root)
+    if not (root / MANIFEST_FILE).exists():
+        return None
+    existing = open_sweep(root)
+    if dataclasses.replace(existing.spec, retries=spec.retries) != spec:
+        raise ValueError(
+            f"{root} holds another sweep (its spec differs from this one); continue it "
+            "with `ilfo sweep run` and no spec, or choose a new directory"
+        )
+    return existing
 
 
 def open_sweep(root: str | Path) -> Sweep:
@@ -352,15 +362,15 @@ def snapshot_sweep(root: str | Path, out: str | Path) -> dict[str, str]:
     afresh.
 
     Returns what became of each run: ``done``, ``checkpoint at step N`` or ``left out (no
-    checkpoint)``. Raises FileExistsError where ``out`` exists and ValueError while any run of
-    the sweep is running (stop the sweep first: Ctrl-C checkpoints every run)."""
+    checkpoint)``. Raises FileExistsError where ``out`` exists, and ValueError where it lies
+    inside the sweep or while any run of the sweep is running (stop the sweep first: Ctrl-C
+    checkpoints every run)."""
     import shutil
 
     from ilfo.training.run_dir import checkpoint_steps, snapshot_run
 
     sweep, out = open_sweep(root), Path(out)
-    if out.exists():
-        raise FileExistsError(f"{out} exists: choose a new directory for the snapshot")
+    check_new_copy_dir(sweep.root, out)
     statuses = sweep.statuses()
     running = [s.name for s in statuses if s.state == "running"]
     if running:

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ilfo.files import load_msgpack
+from ilfo.files import check_new_copy_dir, load_msgpack
 
 if TYPE_CHECKING:  # at run time these are imported where used: they import this module
     from ilfo.agents import Policy
@@ -325,7 +325,8 @@ def snapshot_run(run_dir: str | Path, out: str | Path) -> Path:
     the continuation is not the exact one the full run directory gives.
 
     Raises FileNotFoundError where ``run_dir`` has no complete checkpoint, FileExistsError
-    where ``out`` exists, and ValueError where another process is writing the run."""
+    where ``out`` exists, and ValueError where another process is writing the run or ``out``
+    lies inside it."""
     run_dir, out = Path(run_dir), Path(out)
     read_run_config(run_dir)  # a run directory, or a clear error
     with RunLock(run_dir):  # not while a trainer writes it: a checkpoint could be half-replaced
@@ -335,8 +336,7 @@ def snapshot_run(run_dir: str | Path, out: str | Path) -> Path:
         checkpoint = latest_checkpoint(run_dir)
         if checkpoint is None:
             raise FileNotFoundError(f"{run_dir} has no complete checkpoint to snapshot yet")
-        if out.exists():
-            raise FileExistsError(f"{out} exists: choose a new directory for the snapshot")
+        check_new_copy_dir(run_dir, out)
         tmp = out.with_name(f".{out.name}.tmp")
         shutil.rmtree(tmp, ignore_errors=True)
         (tmp / CHECKPOINTS_DIR).mkdir(parents=True)
