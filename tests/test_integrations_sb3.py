@@ -236,3 +236,88 @@ def test_rewards_equal_the_oops_rewards_of_the_episode():
         assert buffer.ready[row : row + steps, 0].all()
         row += steps
     assert row > 50
+
+
+def _add(buffer, obs, next_obs, done):
+    """One step of one env (observations (d,)) into ``buffer``."""
+    buffer.add(obs[None], next_obs[None], np.zeros((1, 2)), np.ones(1), np.array([done]), [{}])
+
+
+def _episode(buffer, steps, width=3):
+    """A whole episode of ``steps`` steps, of distinct observations."""
+    for t in range(steps):
+        obs = np.full(width, float(t))
+        _add(buffer, obs, obs + 1, t == steps - 1)
+
+
+def test_a_reward_narrower_than_the_observations_is_refused_at_construction():
+    """With a time feature appended and no observation_columns, the error comes when the model
+    is built (not when the first episode ends, inside learn), and names observation_columns."""
+    from ilfo.envs import TimeFeature
+    from ilfo.rewards import OOPS, PWIL
+
+    demos = [np.cumsum(np.full((31, 3), 0.02), axis=0)]
+    env = TimeFeature(RandomLengthEnv(0), horizon=25)
+    for reward in (OOPS(demos), PWIL(demos)):
+        kwargs = {"replay_buffer_class": OTReplayBuffer, "device": "cpu"}
+        with pytest.raises(ValueError, match="observation_columns=3"):
+            sb3.TD3("MlpPolicy", env, replay_buffer_kwargs={"reward": reward}, **kwargs)
+        columns = {"reward": reward, "observation_columns": 3}
+        model = sb3.TD3("MlpPolicy", env, replay_buffer_kwargs=columns, **kwargs)
+        assert model.replay_buffer.observation_columns == 3
+    space = gym.spaces.Box(-1, 1, (2,), np.float32)  # narrower than the demos: no columns help
+    with pytest.raises(ValueError, match=r"dimension 3.*2 columns"):
+        OTReplayBuffer(10, space, space, reward=OOPS(demos))
+
+
+def test_a_reward_without_obs_dim_that_refuses_the_width_names_observation_columns():
+    from ilfo.rewards import OOPS
+
+    oops = OOPS([np.cumsum(np.full((31, 3), 0.02), axis=0)])
+    space = gym.spaces.Box(-1, 1, (4,), np.float32)
+    act = gym.spaces.Box(-1, 1, (2,), np.float32)
+    buffer = OTReplayBuffer(10, space, act, reward=lambda obs: oops(obs).rewards)
+    with pytest.raises(ValueError, match="observation_columns"):
+        _episode(buffer, 3, width=4)
+
+
+@pytest.mark.parametrize("columns", [3.0, True, "3"])
+def test_observation_columns_must_be_an_int(columns):
+    space = gym.spaces.Box(-1, 1, (3,), np.float32)
+    act = gym.spaces.Box(-1, 1, (2,), np.float32)
+    with pytest.raises(ValueError, match="observation_columns must be an int"):
+        OTReplayBuffer(10, space, act, reward=episode_reward, observation_columns=columns)
+    buffer = OTReplayBuffer(10, space, act, reward=episode_reward, observation_columns=np.int64(2))
+    assert buffer.observation_columns == 2
+
+
+def test_an_episode_longer_than_the_buffer_warns_once():
+    seen = []
+
+    def reward(observations):
+        seen.append(observations)
+        return np.zeros(len(observations) - 1)
+
+    space = gym.spaces.Box(-1, 1, (3,), np.float32)
+    act = gym.spaces.Box(-1, 1, (2,), np.float32)
+    buffer = OTReplayBuffer(4, space, act, reward=reward)
+    with pytest.warns(UserWarning, match=r"7 steps.*last 4.*larger buffer_size"):
+        _episode(buffer, 7)
+    np.testing.assert_array_equal(seen[0][:, 0], [3, 4, 5, 6, 7])  # its last 4 steps
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _episode(buffer, 9)  # once: no second warning
+        _episode(buffer, 2)
+    assert buffer.ready_count == buffer.ready.sum() == 4
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_nan_rewards_are_refused(bad):
+    space = gym.spaces.Box(-1, 1, (3,), np.float32)
+    act = gym.spaces.Box(-1, 1, (2,), np.float32)
+    buffer = OTReplayBuffer(10, space, act, reward=lambda obs: np.r_[0.0, bad, 0.0])
+    with pytest.raises(ValueError, match=r"NaN or inf.*episode of 3 steps"):
+        _episode(buffer, 3)
+    assert buffer.ready_count == 0 and not buffer.ready.any()

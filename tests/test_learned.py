@@ -168,3 +168,17 @@ def test_firl_defaults_follow_the_authors():
     assert given.uses_fixed_horizon and given.random_steps == 50
     oops = TrainConfig(env="Hopper-v5", algo="oops-td3")
     assert oops.uses_fixed_horizon and oops.random_steps == 10_000  # ilfo's protocol
+
+
+def test_expert_transitions_checks_its_demos_clearly():
+    demo = np.arange(12, dtype=np.float32).reshape(4, 3)
+    one = expert_transitions(demo)  # one demo as a 2-D array: as [demo], as the episode rewards
+    listed = expert_transitions([demo])
+    np.testing.assert_array_equal(one.obs, listed.obs)
+    np.testing.assert_array_equal(one.next_obs, listed.next_obs)
+    with pytest.raises(ValueError, match="demo 1 contains NaN or inf"):
+        expert_transitions([demo, np.where(demo == 5, np.nan, demo)])
+    with pytest.raises(ValueError, match="different observation dimensions: \\[3, 4\\]"):
+        expert_transitions([demo, np.zeros((5, 4))])
+    with pytest.raises(ValueError, match="at least one"):
+        expert_transitions(np.zeros((0, 4, 3)))

@@ -172,6 +172,18 @@ def test_contact_forces_default_to_off_for_imitation_on_ant_and_humanoid_only():
     assert config_from_settings({"env": "Ant-v5"}, "spec").observes_contact_forces is False
 
 
+def test_a_reward_that_did_not_converge_is_reported_once(tmp_path):
+    from ilfo.rewards import OOPSConfig
+
+    oops = OOPSConfig(max_iter=1, tol=1e-12, solver="sinkhorn")
+    config = TrainConfig(**{**TINY, "steps": 300, "eval_every": 300, "oops": oops})
+    trainer = Trainer(config, tmp_path / "run", progress=False)
+    with pytest.warns(UserWarning, match="did not converge") as caught:
+        trainer.train()
+    assert len([w for w in caught if "did not converge" in str(w.message)]) == 1
+    assert trainer.unconverged_rewards == 3  # every episode, reported once
+
+
 def test_demos_in_which_the_expert_fell_are_named_in_a_warning(tmp_path):
     import warnings
 

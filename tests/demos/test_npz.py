@@ -107,3 +107,38 @@ def test_bad_files(tmp_path):
     )
     with pytest.raises(ValueError, match="NaN"):
         demos.load(nan)
+
+
+def test_save_refuses_what_load_would_refuse_and_keeps_the_old_file(tmp_path):
+    rng = np.random.default_rng(5)
+    path = tmp_path / "good.npz"
+    demos.save(path, _episodes(rng), "Hopper-v5")
+    before = path.read_bytes()
+    bad = {
+        "observations contain NaN": [Episode(np.full((4, 3), np.nan))],
+        "not \\(T \\+ 1, d\\)": [Episode(np.zeros((1, 3)))],  # one observation
+        "actions have shape": [Episode(np.zeros((4, 3)), actions=np.zeros((5, 2)))],
+        "terminated must be boolean": [Episode(np.zeros((4, 3)), terminated=np.zeros(3, int))],
+        "episode 0 has 3": [Episode(np.zeros((4, 3))), Episode(np.zeros((4, 2)))],
+        "episodes 0 have actions, episodes 1 none": [
+            Episode(np.zeros((4, 3)), actions=np.zeros((3, 2))),
+            Episode(np.zeros((4, 3))),
+        ],
+    }
+    for message, episodes in bad.items():
+        with pytest.raises(ValueError, match=message):
+            demos.save(path, episodes, "Hopper-v5")
+    with pytest.raises(ValueError, match="env_id must be a string"):
+        demos.save(path, _episodes(rng), None)
+    assert path.read_bytes() == before  # every refusal left the good file as it was
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["good.npz"]  # and no temporary
+
+
+def test_save_writes_exactly_the_path_given(tmp_path):
+    episodes = _episodes(np.random.default_rng(6))
+    for name in ("demos", "demos.json"):  # numpy would have written demos.npz, demos.json.npz
+        with pytest.raises(ValueError, match=r"ends in \.npz"):
+            demos.save(tmp_path / name, episodes, "Hopper-v5")
+    assert not list(tmp_path.iterdir())
+    demos.save(tmp_path / "d.npz", episodes, "Hopper-v5")
+    assert demos.load(tmp_path / "d.npz").env_id == "Hopper-v5"

@@ -422,8 +422,16 @@ def test_nan_and_inf(tmp_path, fmt, field):
     arr[2] = np.nan if field == "observations" else np.inf
     episodes[1] = Episode(**{**bad.__dict__, field: arr})
     if fmt == "ilfo":
+        with pytest.raises(ValueError, match=f"{field} contain NaN or inf"):
+            demos.save(tmp_path / "refused.npz", episodes, "Hopper-v5")  # not written
+        # A file from elsewhere: the good episodes' arrays with the bad row put back.
         path = tmp_path / "x.npz"
-        demos.save(path, episodes, "Hopper-v5")
+        demos.save(path, _episodes(), "Hopper-v5", compact=False)
+        with np.load(path) as archive:
+            arrays = dict(archive)
+        first_row = len(episodes[0].observations) - (field == "rewards")
+        arrays[field][first_row + 2] = arr[2]
+        np.savez(path, **arrays)
     elif fmt == "minari":
         path = _write_minari(tmp_path, _minari_eps(episodes))
     elif fmt == "d4rl":

@@ -84,6 +84,16 @@ def test_warm_start_gives_the_same_rewards():
         np.testing.assert_allclose(warm(learner).rewards, cold(learner).rewards, atol=1e-6)
 
 
+def test_a_warm_start_saved_against_other_demos_is_dropped_not_a_failure():
+    learner = _episode(seed=14)
+    saved = OOPS([_episode(length=30, seed=13)], OOPSConfig(warm_start=True))
+    saved(learner)
+    other = OOPS([_episode(seed=13)], OOPSConfig(warm_start=True))  # a 40-step demo
+    other.load_state(saved.state())
+    cold = OOPS([_episode(seed=13)])
+    np.testing.assert_allclose(other(learner).rewards, cold(learner).rewards, atol=1e-6)
+
+
 def test_episodes_of_other_lengths_than_the_demo():
     out = OOPS([_episode(length=50, seed=15)])(_episode(length=17, seed=16))
     assert out.rewards.shape == (17,)
@@ -138,7 +148,18 @@ def test_pwil_kernel_dim_sets_the_kernel_width():
     assert (wide.rewards >= default.rewards).all()
 
 
-@pytest.mark.parametrize("bad", [{"subsample": 0}, {"kernel_dim": 0}, {"horizon": 0}])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"subsample": 0},
+        {"subsample": 2.5},  # would fail later as a slice step
+        {"kernel_dim": 0},
+        {"horizon": 0},
+        {"alpha": float("nan")},  # NaN rewards
+        {"beta": float("inf")},
+        {"beta": 0.0},
+    ],
+)
 def test_pwil_config_refuses_bad_values(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):
         PWILConfig(**bad)
@@ -186,7 +207,18 @@ def test_bad_config():
         OOPSConfig(solver="hungarian")
     with pytest.raises(ValueError, match="reg"):
         OOPSConfig(reg=0.0)
+    # Refused when the config is made, not at a run's first solve (after its directory is made).
+    for bad in ({"reg": float("inf")}, {"tol": 0.0}, {"reward_scale": float("nan")}):
+        with pytest.raises(ValueError, match=f"{next(iter(bad))} must be positive and finite"):
+            OOPSConfig(**bad)
+    for max_iter in (0, 100.5, True):
+        with pytest.raises(ValueError, match="max_iter must be an int >= 1"):
+            OOPSConfig(max_iter=max_iter)
     with pytest.raises(ValueError, match="demo_selection"):
         OOPSConfig(demo_selection="best")
+    with pytest.raises(TypeError, match="config must be an OOPSConfig, got dict"):
+        OOPS([_episode()], {"reg": 0.1})
+    with pytest.raises(TypeError, match="config must be a PWILConfig, got OOPSConfig"):
+        PWIL([_episode()], OOPSConfig())
     with pytest.raises(ValueError, match="unknown metric"):
         OOPS([_episode()], OOPSConfig(metric="manhattan"))(_episode())

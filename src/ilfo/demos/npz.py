@@ -13,6 +13,7 @@ otherwise; rewards always as float64 (scores are sums of them). Readers accept e
 from __future__ import annotations
 
 import json
+import os
 import zipfile
 import zlib
 from collections.abc import Sequence
@@ -81,13 +82,28 @@ def save(
     provenance: dict[str, Any] | None = None,
     compact: bool = True,
 ) -> None:
-    """Write episodes to ``path`` (.npz) in schema 1.
+    """Write episodes to ``path`` (.npz) in schema 1, checked as ``load`` checks them (so what
+    is written can be read back), and atomically: a crash part-way leaves any old file whole.
 
     ``compact``: observations and actions as float32 where ``float32_is_lossless`` (half the
-    size); False keeps the episodes' dtypes.
+    size); False keeps the episodes' dtypes. Actions, rewards and terminated are kept where
+    every episode has them; a ValueError where only some do (they would be lost).
     """
+    path = Path(path)
+    if path.suffix != ".npz":  # numpy would append one and write elsewhere
+        raise ValueError(f"{path}: a demonstration file's name ends in .npz")
+    if not isinstance(env_id, str):
+        raise ValueError(f"env_id must be a string (a gymnasium id, or ''), got {env_id!r}")
     if not episodes:
         raise ValueError("no episodes to save")
+    episodes = checked_episodes(list(episodes), f"{path} (not written)")
+    for name in ("actions", "rewards", "terminated"):
+        have = [getattr(e, name) is not None for e in episodes]
+        if any(have) and not all(have):
+            raise ValueError(
+                f"{path} (not written): episodes {_indices(have)} have {name}, episodes "
+                f"{_indices([not h for h in have])} none; give them to all episodes or to none"
+            )
     lengths = np.array([len(e.observations) for e in episodes], dtype=np.int64)
     arrays: dict[str, np.ndarray] = {
         "schema_version": np.array(SCHEMA_VERSION),
@@ -104,7 +120,20 @@ def save(
         for name in ("observations", "actions"):
             if name in arrays and float32_is_lossless(arrays[name]):
                 arrays[name] = arrays[name].astype(np.float32)
-    np.savez_compressed(path, **arrays)
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        with open(tmp, "wb") as file:  # a file object: numpy adds no suffix
+            np.savez_compressed(file, **arrays)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _indices(flags: list[bool], shown: int = 5) -> str:
+    """'0, 2, 7' for the True entries, the first ``shown`` of them and a count of the rest."""
+    hits = [str(i) for i, flag in enumerate(flags) if flag]
+    more = f" and {len(hits) - shown} more" if len(hits) > shown else ""
+    return ", ".join(hits[:shown]) + more
 
 
 def float32_is_lossless(values: np.ndarray, tolerance: float = FLOAT32_TOLERANCE) -> bool:
@@ -133,7 +162,10 @@ def load(path: str | Path) -> DemoFile:
     if not path.is_file():
         raise FileNotFoundError(f"no demonstration file at {path}")
     if not zipfile.is_zipfile(path):
-        raise ValueError(f"{path} is not an .npz archive (nor any demonstration file ilfo reads)")
+        raise ValueError(
+            f"{path} is not an .npz archive; for D4RL, Minari or imitation files use "
+            "ilfo.demos.load_any (or `ilfo demos convert` to make an ilfo file)"
+        )
     try:
         with np.load(path, allow_pickle=False) as archive:
             data = {k: archive[k] for k in archive.files}
@@ -191,14 +223,14 @@ def load(path: str | Path) -> DemoFile:
     return DemoFile(episodes=checked_episodes(episodes, path), env_id=env_id, provenance=provenance)
 
 
-def numeric_array(arr: np.ndarray, name: str, path: Path) -> np.ndarray:
+def numeric_array(arr: np.ndarray, name: str, path: str | Path) -> np.ndarray:
     arr = np.asarray(arr)
     if arr.dtype.kind not in "biuf":
         raise ValueError(f"{path}: {name!r} holds {arr.dtype} data, not numbers")
     return arr
 
 
-def checked_episodes(episodes: list[Episode], path: Path) -> list[Episode]:
+def checked_episodes(episodes: list[Episode], path: str | Path) -> list[Episode]:
     """Episodes with observations (T + 1, d) as floats, actions (T, a), rewards (T,), all finite
     and with the same d and a throughout, terminated (T,) boolean; raise ValueError naming the
     first problem."""
@@ -249,7 +281,7 @@ def checked_episodes(episodes: list[Episode], path: Path) -> list[Episode]:
             rewards = rewards.astype(np.float64)
             if not np.isfinite(rewards).all():
                 raise ValueError(f"{where}: rewards contain NaN or inf")
-        terminated = ep.terminated
+        terminated = None if ep.terminated is None else np.asarray(ep.terminated)
         if terminated is not None and (
             terminated.dtype != np.bool_ or terminated.shape != (steps,)
         ):

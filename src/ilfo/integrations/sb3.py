@@ -34,6 +34,7 @@ feature (``observation_columns`` hides the time feature from the reward).
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -57,7 +58,8 @@ class OTReplayBuffer(ReplayBuffer):
     """SB3's ``ReplayBuffer`` with each episode's rewards from ``reward`` (see the module).
 
     Args (besides SB3's):
-        reward: The episode reward: observations (T + 1, d) -> rewards (T,).
+        reward: The episode reward: observations (T + 1, d) -> rewards (T,). Where it has an
+            ``obs_dim`` (ilfo's rewards: its demos' dimension), d must equal it.
         observation_columns: Give the reward only the first this many columns of each
             observation (e.g. the env's own ones, without an appended time feature); None: all.
     """
@@ -85,10 +87,20 @@ class OTReplayBuffer(ReplayBuffer):
         if not callable(reward):
             raise ValueError(f"reward must be callable (an episode reward), got {reward!r}")
         width = observation_space.shape[0]
-        if observation_columns is not None and not 1 <= observation_columns <= width:
-            raise ValueError(
-                f"observation_columns must be between 1 and {width}, got {observation_columns}"
-            )
+        if observation_columns is not None:
+            if isinstance(observation_columns, bool) or not isinstance(
+                observation_columns, int | np.integer
+            ):
+                raise ValueError(
+                    "observation_columns must be an int (how many leading columns of each "
+                    f"observation the reward sees) or None, got {observation_columns!r}"
+                )
+            observation_columns = int(observation_columns)
+            if not 1 <= observation_columns <= width:
+                raise ValueError(
+                    f"observation_columns must be between 1 and {width}, got {observation_columns}"
+                )
+        _check_reward_width(reward, width, observation_columns)
         super().__init__(
             buffer_size,
             observation_space,
@@ -107,6 +119,7 @@ class OTReplayBuffer(ReplayBuffer):
         self.episode_steps = np.zeros(self.n_envs, dtype=np.int64)
         """Steps of each env's running episode stored so far."""
         self.episodes_labelled = 0
+        self._warned_long_episode = False
 
     def add(
         self,
@@ -128,17 +141,44 @@ class OTReplayBuffer(ReplayBuffer):
 
     def _label_episode(self, env: int, last_row: int) -> None:
         steps = int(min(self.episode_steps[env], self.buffer_size))  # longer: its start is gone
+        if self.episode_steps[env] > self.buffer_size and not self._warned_long_episode:
+            self._warned_long_episode = True
+            warnings.warn(
+                f"an episode of {self.episode_steps[env]} steps is longer than the replay "
+                f"buffer's {self.buffer_size} rows per env: it is rewarded, as an episode of "
+                f"its own, on its last {self.buffer_size} steps only (the rest is overwritten); "
+                "set a larger buffer_size (at least the longest episode's steps times n_envs) "
+                "to reward whole episodes. Warned once.",
+                stacklevel=3,
+            )
         rows = (last_row - steps + 1 + np.arange(steps)) % self.buffer_size
         observations = np.concatenate(
             [self.observations[rows, env], self.next_observations[last_row, env][None]]
         ).astype(np.float64)
         if self.observation_columns is not None:
             observations = observations[:, : self.observation_columns]
-        out = self.reward(observations)
+        try:
+            out = self.reward(observations)
+        except ValueError as err:
+            if isinstance(getattr(self.reward, "obs_dim", None), int | np.integer):
+                raise  # its width was checked at construction: the error is about another thing
+            raise ValueError(
+                f"the reward refused an episode of {steps} steps with observations of "
+                f"{observations.shape[1]} columns ({err}); if it expects fewer (e.g. not an "
+                "appended time feature), set the buffer's observation_columns"
+            ) from err
         rewards = np.asarray(getattr(out, "rewards", out), dtype=np.float64).reshape(-1)
         if rewards.shape != (steps,):
             raise ValueError(
                 f"the reward gave {rewards.shape[0]} rewards for an episode of {steps} steps"
+            )
+        if not np.isfinite(rewards).all():
+            where = np.flatnonzero(~np.isfinite(rewards))
+            raise ValueError(
+                f"the reward function returned NaN or inf for an episode of {steps} steps (at "
+                f"steps {where[:5].tolist()}{', ...' if len(where) > 5 else ''}; the episode's "
+                f"observations are {'' if np.isfinite(observations).all() else 'not '}finite): "
+                "the buffer would train on them; fix the reward (or the env's observations)"
             )
         self.rewards[rows, env] = rewards
         self.ready_count += steps  # the running episode's rows: none was ready
@@ -182,3 +222,27 @@ class OTReplayBuffer(ReplayBuffer):
             self._normalize_reward(self.rewards[rows, envs].reshape(-1, 1), env),
         )
         return ReplayBufferSamples(*tuple(map(self.to_torch, data)))
+
+
+def _check_reward_width(reward: Any, width: int, observation_columns: int | None) -> None:
+    """Where the reward knows its demos' dimension (``obs_dim``), refuse now the observations
+    of another width that it would refuse only when the first episode ends, inside ``learn``."""
+    obs_dim = getattr(reward, "obs_dim", None)
+    if isinstance(obs_dim, bool) or not isinstance(obs_dim, int | np.integer):
+        return  # not known: the reward checks each episode itself
+    given = width if observation_columns is None else observation_columns
+    if given == obs_dim:
+        return
+    problem = (
+        f"the reward's demonstrations have observations of dimension {obs_dim}, but the "
+        f"buffer would give it {given} columns of each observation"
+    )
+    if obs_dim < width:
+        raise ValueError(
+            f"{problem}: set observation_columns={obs_dim} to give it the first {obs_dim} (e.g. "
+            "the env's own, without an appended time feature such as TimeFeature's)"
+        )
+    raise ValueError(
+        f"{problem}, {width} in all: the env's observations are narrower than the demos'; "
+        "use demonstrations recorded in this env"
+    )

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ilfo.ot._checks import check_problem
+from ilfo.ot._checks import check_max_iter, check_problem, rebalance
 from ilfo.ot.result import OTResult, make_result
 
 
@@ -19,8 +19,10 @@ def emd(
     Args:
         cost: Cost matrix, shape (n, m).
         a: Source weights, shape (n,); uniform if None.
-        b: Target weights, shape (m,), same mass as a; uniform if None.
-        max_iter: Most simplex pivots; POT's default (100,000) is too few for 1000 x 10000.
+        b: Target weights, shape (m,), same mass as a (to 1e-6 relative: it is rescaled to a's
+            mass); uniform if None.
+        max_iter: Most simplex pivots, an int >= 1; POT's default (100,000) is too few for
+            1000 x 10000.
 
     Returns:
         An :class:`OTResult` with the exact plan and the dual potentials; ``iterations`` is None
@@ -29,9 +31,10 @@ def emd(
     import ot as pot  # here, not at import: POT's backends import torch, TF, ... where installed
 
     cost, a, b = check_problem(cost, a, b)
+    max_iter = check_max_iter(max_iter)
     # POT rescales b to a's mass with a warning if they differ by rounding; make them agree.
-    b = b * (a.sum() / b.sum())
-    plan, log = pot.emd(a, b, cost, numItermax=int(max_iter), log=True)
+    b = rebalance(a, b)
+    plan, log = pot.emd(a, b, cost, numItermax=max_iter, log=True)
     return make_result(
         np.asarray(plan, dtype=np.float64),
         cost,

@@ -22,9 +22,12 @@ class OTResult:
         g: Target dual potential, shape (m,), or None where the solver has none (greedy).
         iterations: Solver iterations run (Sinkhorn updates of both potentials; 0 for greedy;
             None where the solver does not report a count, as POT's network simplex).
-        converged: Whether the solver met its own stopping criterion.
+        converged: Whether the solver met its own stopping criterion (Sinkhorn: whether
+            ``marginal_error < tol * sum(a)``, judged on this plan).
         marginal_error: L1 distance of both marginals to a and b,
-            ``|plan.sum(1) - a|_1 + |plan.sum(0) - b|_1``, computed on the returned plan.
+            ``|plan.sum(1) - a|_1 + |plan.sum(0) - b|_1``, computed on the returned plan; absolute
+            (in units of mass: divide by ``sum(a)`` for a relative error). b is the one the
+            solver used: Sinkhorn and EMD rescale it to a's mass where the two differ by rounding.
     """
 
     plan: np.ndarray

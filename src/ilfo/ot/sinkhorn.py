@@ -22,12 +22,13 @@ are the dual potentials in the units of the cost, and can warm-start the next so
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Literal
 
 import numpy as np
 import scipy.linalg
 
-from ilfo.ot._checks import check_problem
+from ilfo.ot._checks import check_max_iter, check_problem, rebalance
 from ilfo.ot.result import OTResult, make_result
 
 Acceleration = Literal["newton", "overrelax", "none"]
@@ -45,6 +46,9 @@ _NEWTON_POOR_STEPS = 3  # consecutive Newton steps that fail to halve the error 
 _NEWTON_MAX_STEPS = 30  # each an m x m Cholesky: beyond this Sinkhorn goes on instead
 _WARMUP = 10  # plain iterations before the first estimate: the first ones are transient
 _MAX_SCALE = 1e12  # largest |cost| / reg whose kernel float64 resolves (_check_resolution)
+# Masses closer than this (relative) are sums of the same weights rounded differently (uniform
+# weights: a few ulps): b is left as is, so that those results are bit-identical to before.
+_REBALANCE_RTOL = 1e-12
 
 
 def sinkhorn(
@@ -62,36 +66,42 @@ def sinkhorn(
     Args:
         cost: Cost matrix C, shape (n, m).
         a: Source weights, shape (n,), non-negative; uniform (1/n) if None.
-        b: Target weights, shape (m,), same total mass as a; uniform (1/m) if None.
+        b: Target weights, shape (m,), same total mass as a (to 1e-6 relative, e.g. float32
+            weights: b is then rescaled to a's mass); uniform (1/m) if None.
         reg: Absolute entropic regularisation (lambda), > 0. The paper uses 0.05.
-        tol: Stop when the L1 error of both marginals, |P1 - a|_1 + |P^T 1 - b|_1, is below tol.
-        max_iter: Most iterations (one iteration updates both scalings).
+        tol: Relative to the mass: stop when the L1 error of both marginals,
+            |P1 - a|_1 + |P^T 1 - b|_1, is below tol * sum(a), so that scaling the weights
+            scales nothing else (for weights of mass 1, as uniform ones, it is absolute).
+        max_iter: Most iterations (one iteration updates both scalings), an int >= 1.
         init: Warm start: dual potentials (f, g) of shapes (n,) and (m,), e.g. a previous
-            result's ``potentials``.
+            result's ``potentials``. Finite where the weights are positive; entries where a
+            weight is 0 are ignored (a result's potentials hold -inf there).
         acceleration: ``newton`` (default: adaptive over-relaxation, then Newton steps on the
             dual once the predicted number of remaining iterations gets large), ``overrelax``
             (over-relaxation only) or ``none`` (plain Sinkhorn).
 
     Returns:
-        An :class:`OTResult`; ``converged`` is False if ``tol`` was not met within ``max_iter``.
+        An :class:`OTResult`; ``converged`` is whether its ``marginal_error`` (absolute, on the
+        returned plan) is below ``tol * sum(a)``: False if that was not met within ``max_iter``.
     """
     cost, a, b = check_problem(cost, a, b)
     if not (np.isfinite(reg) and reg > 0):
         raise ValueError(f"reg must be a positive finite number, got {reg!r}")
     if not tol > 0:
         raise ValueError(f"tol must be positive, got {tol!r}")
-    if max_iter < 1:
-        raise ValueError(f"max_iter must be >= 1, got {max_iter!r}")
+    max_iter = check_max_iter(max_iter)
     if acceleration not in ("newton", "overrelax", "none"):
         raise ValueError(
             f"acceleration must be 'newton', 'overrelax' or 'none', got {acceleration!r}"
         )
-    if init is not None:
-        init = _check_init(init, cost.shape)
+    b = rebalance(a, b, _REBALANCE_RTOL)
+    tol_mass = tol * a.sum()
 
     rows, cols = a > 0, b > 0
+    if init is not None:
+        init = _check_init(init, cost.shape, rows, cols)
     if rows.all() and cols.all():
-        return _solve(cost, a, b, reg, tol, max_iter, init, acceleration)
+        return _judged(_solve(cost, a, b, reg, tol_mass, max_iter, init, acceleration), tol_mass)
     # Zero-mass atoms carry no plan; solve on the support and scatter back.
     sub_init = None if init is None else (init[0][rows], init[1][cols])
     sub = _solve(
@@ -99,7 +109,7 @@ def sinkhorn(
         a[rows],
         b[cols],
         reg,
-        tol,
+        tol_mass,
         max_iter,
         sub_init,
         acceleration,
@@ -109,9 +119,19 @@ def sinkhorn(
     f = np.full(cost.shape[0], -np.inf)
     g = np.full(cost.shape[1], -np.inf)
     f[rows], g[cols] = sub.f, sub.g
-    return make_result(
+    result = make_result(
         plan, cost, a, b, f=f, g=g, iterations=sub.iterations, converged=sub.converged
     )
+    return _judged(result, tol_mass)
+
+
+def _judged(result: OTResult, tol_mass: float) -> OTResult:
+    """``converged`` judged on the returned plan, so that it agrees with ``marginal_error``.
+
+    The loop's own error comes from the scalings before the plan is formed: it differs from the
+    plan's by rounding (which grows with the mass), and the last half-iteration after it may
+    meet tol when the loop did not."""
+    return dataclasses.replace(result, converged=bool(result.marginal_error < tol_mass))
 
 
 def _solve(
@@ -124,12 +144,16 @@ def _solve(
     init: tuple[np.ndarray, np.ndarray] | None,
     acceleration: Acceleration,
 ) -> OTResult:
+    """Sinkhorn on weights that are all positive; ``tol`` is absolute here (tol * mass)."""
     kernel = np.empty_like(cost)
     f, g = _initial_potentials(kernel, cost, init, reg)
     u = np.ones_like(a)
     v = np.ones_like(b)
     omega = 1.0
-    errors = np.full(max_iter, np.nan)  # NaN where Newton stepped: omega's rate then holds
+    # The last _RATE_WINDOW + 1 errors, errors[it % window] (O(1) memory whatever max_iter);
+    # NaN where Newton stepped: omega's rate then holds.
+    window = _RATE_WINDOW + 1
+    errors = np.full(window, np.nan)
     converged = False
     newton_allowed = acceleration == "newton"
     iterations = 0
@@ -146,7 +170,7 @@ def _solve(
             col = v * ktu
             # Marginal error of the pair (u_new, v): both marginals come from products made.
             err = np.abs(u_new * kv - a).sum() + np.abs(col - b).sum()
-            errors[it] = err
+            errors[it % window] = err
             u = u_new
             if err < tol:
                 converged = True
@@ -164,7 +188,7 @@ def _solve(
                 u = np.ones_like(a)
                 v = np.ones_like(b)
             if acceleration != "none" and it >= _WARMUP and (it - _WARMUP) % _RATE_WINDOW == 0:
-                err_before = errors[it - _RATE_WINDOW]
+                err_before = errors[(it - _RATE_WINDOW) % window]
                 if newton_allowed and it >= _NEWTON_MIN_SINKHORN:
                     remaining = _predicted_iterations(err_before, err, tol)
                     if remaining > min(_NEWTON_SWITCH, max_iter - iterations):
@@ -179,6 +203,8 @@ def _solve(
             u, v, steps, converged = _newton(kernel, a, b, v, tol, budget)
         else:
             v, u, steps, converged = _newton(kernel.T, b, a, u, tol, budget)
+        for k in range(iterations, iterations + min(steps, window)):
+            errors[k % window] = np.nan
         iterations += steps
         # If Newton stalls (a near-singular Jacobian), Sinkhorn goes on from where it stopped.
         newton_allowed = False
@@ -343,8 +369,13 @@ def _in_range(x: np.ndarray) -> bool:
 
 
 def _check_init(
-    init: tuple[np.ndarray, np.ndarray], shape: tuple[int, int]
+    init: tuple[np.ndarray, np.ndarray],
+    shape: tuple[int, int],
+    rows: np.ndarray,
+    cols: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
+    """Warm-start potentials as float64; finite on the support (``rows``, ``cols``) only: off it
+    they are never read, and a result's own potentials hold -inf there."""
     if len(init) != 2:
         raise ValueError("init must be a pair of potentials (f, g)")
     f = np.asarray(init[0], dtype=np.float64)
@@ -354,6 +385,6 @@ def _check_init(
             f"init potentials must have shapes ({shape[0]},) and ({shape[1]},), "
             f"got {f.shape} and {g.shape}"
         )
-    if not (np.isfinite(f).all() and np.isfinite(g).all()):
-        raise ValueError("init potentials contain NaN or inf")
+    if not (np.isfinite(f[rows]).all() and np.isfinite(g[cols]).all()):
+        raise ValueError("init potentials contain NaN or inf where the weights are positive")
     return f, g

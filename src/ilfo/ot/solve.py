@@ -25,9 +25,10 @@ def solve(
     init: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> OTResult:
     """The coupling of ``cost`` (n, m) between uniform weights by ``solver``: ``sinkhorn``
-    (entropic OT with ``reg``, ``tol``, ``max_iter`` and the warm start ``init``), ``emd``
-    (exact, network simplex) or ``greedy`` (PWIL's; rows in order). The Sinkhorn settings
-    apply to Sinkhorn only."""
+    (entropic OT with ``reg``, ``tol`` relative to the mass, an int ``max_iter`` and the warm
+    start ``init``, all checked as :func:`~ilfo.ot.sinkhorn` does), ``emd`` (exact, network
+    simplex) or ``greedy`` (PWIL's; rows in order). The Sinkhorn settings apply to Sinkhorn
+    only."""
     if solver == "sinkhorn":
         return sinkhorn(cost, reg=reg, tol=tol, max_iter=max_iter, init=init)
     if solver == "emd":

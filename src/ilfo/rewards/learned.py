@@ -20,6 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ilfo.replay import ReplayData, sample_batch
+from ilfo.rewards.base import check_demos
 
 
 class Transitions(NamedTuple):
@@ -34,10 +35,13 @@ class Transitions(NamedTuple):
 def expert_transitions(demos: Sequence[np.ndarray], min_count: int = 1) -> Transitions:
     """All transitions (s_t, s_t+1) of the demos (each (T_i + 1, obs_dim)), pooled.
 
-    Raises a ValueError where they hold fewer than ``min_count`` transitions (a batch size), or
-    a demo has fewer than two observations (no transition).
+    One demo may come as a 2-D array, as the episode rewards take it. Raises a ValueError where
+    they hold fewer than ``min_count`` transitions (a batch size), a demo has fewer than two
+    observations (no transition) or NaN or inf, or the demos' observation dimensions differ.
     """
-    if not demos:
+    if isinstance(demos, np.ndarray) and demos.ndim == 2:
+        demos = [demos]  # one demo, as check_demos takes it
+    if len(demos) == 0:
         raise ValueError("a learned reward needs at least one demonstration")
     for i, demo in enumerate(demos):
         if np.ndim(demo) != 2 or len(demo) < 2:
@@ -45,6 +49,7 @@ def expert_transitions(demos: Sequence[np.ndarray], min_count: int = 1) -> Trans
                 f"demo {i} has shape {np.shape(demo)}: a learned reward needs (s, s') "
                 "transitions, i.e. at least two observations of shape (T + 1, obs_dim)"
             )
+    demos = check_demos(demos)  # finite, and one observation dimension
     obs = np.concatenate([np.asarray(d[:-1], np.float32) for d in demos])
     next_obs = np.concatenate([np.asarray(d[1:], np.float32) for d in demos])
     if len(obs) < min_count:

@@ -8,6 +8,7 @@ Defaults reproduce the paper's code (see docs/reproduction.md for where it depar
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -15,6 +16,7 @@ from typing import Literal
 import numpy as np
 
 from ilfo.ot import METRICS, SOLVERS, Metric, OTResult, Solver, cost_matrix, solve
+from ilfo.ot._checks import check_max_iter
 from ilfo.rewards.base import (
     Atoms,
     RewardOutput,
@@ -44,7 +46,8 @@ class OOPSConfig:
     reg: float = 0.05
     """Sinkhorn's absolute entropic regularisation lambda."""
     tol: float = 1e-9
-    """Sinkhorn stops when the L1 error of both marginals is below this."""
+    """Sinkhorn stops when the L1 error of both marginals is below this times the mass (1:
+    OOPS's weights are uniform)."""
     max_iter: int = 20000
     """Most Sinkhorn iterations (the paper's code always ran 20,000, in float32)."""
     reward_scale: float = 5.0
@@ -75,10 +78,12 @@ class OOPSConfig:
             raise ValueError(
                 f"demo_selection must be random, pooled or nearest, got {self.demo_selection!r}"
             )
-        if not self.reg > 0:
-            raise ValueError(f"reg must be positive, got {self.reg!r}")
-        if not self.reward_scale > 0:
-            raise ValueError(f"reward_scale must be positive, got {self.reward_scale!r}")
+        # Checked here, before a trainer writes a run directory around a config that fails.
+        for name in ("reg", "tol", "reward_scale"):
+            value = getattr(self, name)
+            if not 0 < value < math.inf:
+                raise ValueError(f"{name} must be positive and finite, got {value!r}")
+        check_max_iter(self.max_iter)
 
 
 class OOPS:
@@ -90,6 +95,8 @@ class OOPS:
     """
 
     def __init__(self, demos: Sequence[np.ndarray], config: OOPSConfig | None = None) -> None:
+        if config is not None and not isinstance(config, OOPSConfig):
+            raise TypeError(f"config must be an OOPSConfig, got {type(config).__name__}")
         self.config = config or OOPSConfig()
         demos = check_demos(demos)
         self.obs_dim = demos[0].shape[1]
@@ -156,8 +163,9 @@ class OOPS:
         cfg = self.config
         cost = cost_matrix(learner, expert, cfg.metric)
         init = self._potentials.get(key) if cfg.warm_start else None
-        if init is not None and init[0].shape[0] != cost.shape[0]:
-            init = None  # a learner episode of another length: nothing to reuse
+        if init is not None and (init[0].shape[0], init[1].shape[0]) != cost.shape:
+            # A learner episode of another length, or a state saved against other demos.
+            init = None
         result = solve(cost, cfg.solver, reg=cfg.reg, tol=cfg.tol, max_iter=cfg.max_iter, init=init)
         if cfg.warm_start and cfg.solver == "sinkhorn" and result.converged:
             self._potentials[key] = (result.f, result.g)

@@ -13,6 +13,7 @@ PWIL-(s) results were run with): it keeps every 20th state of each demo from a r
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -50,12 +51,21 @@ class PWILConfig:
     """Draws the subsampling offsets. Set by the trainer: the run's seed."""
 
     def __post_init__(self) -> None:
-        if self.horizon is not None and self.horizon < 1:
-            raise ValueError(f"horizon must be >= 1, got {self.horizon!r}")
-        if self.subsample < 1:
-            raise ValueError(f"subsample must be >= 1, got {self.subsample!r}")
-        if self.kernel_dim is not None and self.kernel_dim < 1:
-            raise ValueError(f"kernel_dim must be >= 1, got {self.kernel_dim!r}")
+        for name in ("alpha", "beta"):
+            value = getattr(self, name)
+            if not 0 < value < math.inf:
+                raise ValueError(f"{name} must be positive and finite, got {value!r}")
+        for name, value in (
+            ("horizon", self.horizon),
+            ("subsample", self.subsample),
+            ("kernel_dim", self.kernel_dim),
+        ):
+            if value is not None and (_not_an_int(value) or value < 1):
+                raise ValueError(f"{name} must be an int >= 1, got {value!r}")
+
+
+def _not_an_int(value: object) -> bool:
+    return isinstance(value, bool) or not isinstance(value, (int, np.integer))
 
 
 class PWIL:
@@ -65,6 +75,8 @@ class PWIL:
     """
 
     def __init__(self, demos: Sequence[np.ndarray], config: PWILConfig | None = None) -> None:
+        if config is not None and not isinstance(config, PWILConfig):
+            raise TypeError(f"config must be a PWILConfig, got {type(config).__name__}")
         self.config = config or PWILConfig()
         demos = check_demos(demos)
         self.obs_dim = demos[0].shape[1]

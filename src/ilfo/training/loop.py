@@ -116,6 +116,7 @@ class Trainer:
         self.distance_probe = demos.distance_probe
         self.demo_source = demos.source
         self.rewarder = make_reward(config, self.demos)
+        self.unconverged_rewards = 0  # episodes whose coupling missed its tolerance
         self.agent = make_agent(config, env, self.demos)
         self.state = self.agent.functions.init(config.seed)
         self.buffer = self._new_buffer()
@@ -243,6 +244,21 @@ class Trainer:
             raise
         bar.close()
 
+    def _report_unconverged(self, output: RewardOutput) -> None:
+        """Say once per process that a coupling missed its tolerance (its rewards are used as
+        they are); later ones are counted in ``unconverged_rewards``. At the paper's settings
+        Sinkhorn converges in tens of iterations, so one that does not is worth a look."""
+        self.unconverged_rewards += 1
+        if self.unconverged_rewards == 1:
+            coupling = output.coupling
+            warnings.warn(
+                f"episode {self.episode}: the reward's coupling did not converge "
+                f"({coupling.iterations} iterations, marginal error "
+                f"{coupling.marginal_error:.3g}); its rewards are used as they are. Later "
+                "ones are not reported. A larger max_iter or reg converges sooner.",
+                stacklevel=2,
+            )
+
     def _episode(self) -> dict[str, Any]:
         """Collect, reward, store and learn from one episode; evaluate when due."""
         cfg = self.config
@@ -264,6 +280,8 @@ class Trainer:
                 output = self.rewarder(observations)
             self.hooks.episode_rewarded(self, output)
             rewards = output.rewards
+            if not output.coupling.converged:
+                self._report_unconverged(output)
         elif self.config.recipe.learned:
             # The agent's update rewards its batches with the reward's parameters of the time;
             # these (today's, stored but not learned from) are the episode's proxy return.
