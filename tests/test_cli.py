@@ -79,13 +79,17 @@ def test_stop_signals_interrupt_even_where_sigint_was_ignored():
         signal.signal(signal.SIGINT, before)
 
 
-def test_a_bad_flag_is_not_buried_under_the_full_usage(capsys):
+def test_a_bad_flag_is_not_buried_under_the_full_usage(capsys, tmp_path):
     with pytest.raises(SystemExit) as stopped:
         main(["train", "--algo", "nope"])
     assert stopped.value.code == 2
     err = capsys.readouterr().err.splitlines()
     assert err[0] == "usage: ilfo train [options]  (all of them: ilfo train --help)"
     assert "invalid choice: 'nope'" in err[1] and len(err) == 2
+    with pytest.raises(SystemExit):  # a sweep's train flags: the help is `ilfo train`'s
+        main(["sweep", "run", str(tmp_path / "s"), "--env", "Hopper-v5", "--steps", "abc"])
+    assert "(all of them: ilfo train --help)" in capsys.readouterr().err
+    assert not (tmp_path / "s").exists()
     with pytest.raises(SystemExit):  # a short usage is shown as it is
         main(["demos", "info"])
     assert capsys.readouterr().err.startswith("usage: ilfo demos info [-h] [--json] file")

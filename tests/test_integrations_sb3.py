@@ -268,6 +268,9 @@ def test_a_reward_narrower_than_the_observations_is_refused_at_construction():
     space = gym.spaces.Box(-1, 1, (2,), np.float32)  # narrower than the demos: no columns help
     with pytest.raises(ValueError, match=r"dimension 3.*2 columns"):
         OTReplayBuffer(10, space, space, reward=OOPS(demos))
+    space = gym.spaces.Box(-1, 1, (3,), np.float32)  # as wide, but columns cut off
+    with pytest.raises(ValueError, match="leave observation_columns None"):
+        OTReplayBuffer(10, space, space, reward=OOPS(demos), observation_columns=2)
 
 
 def test_a_reward_without_obs_dim_that_refuses_the_width_names_observation_columns():

@@ -178,7 +178,7 @@ def test_a_reward_that_did_not_converge_is_reported_once(tmp_path):
     oops = OOPSConfig(max_iter=1, tol=1e-12, solver="sinkhorn")
     config = TrainConfig(**{**TINY, "steps": 300, "eval_every": 300, "oops": oops})
     trainer = Trainer(config, tmp_path / "run", progress=False)
-    with pytest.warns(UserWarning, match="did not converge") as caught:
+    with pytest.warns(UserWarning, match="sinkhorn coupling did not converge") as caught:
         trainer.train()
     assert len([w for w in caught if "did not converge" in str(w.message)]) == 1
     assert trainer.unconverged_rewards == 3  # every episode, reported once

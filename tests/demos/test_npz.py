@@ -142,3 +142,7 @@ def test_save_writes_exactly_the_path_given(tmp_path):
     assert not list(tmp_path.iterdir())
     demos.save(tmp_path / "d.npz", episodes, "Hopper-v5")
     assert demos.load(tmp_path / "d.npz").env_id == "Hopper-v5"
+    link = tmp_path / "link.npz"  # a symlink is written through, not replaced
+    link.symlink_to(tmp_path / "d.npz")
+    demos.save(link, episodes[:1], "Walker2d-v5")
+    assert link.is_symlink() and demos.load(tmp_path / "d.npz").env_id == "Walker2d-v5"

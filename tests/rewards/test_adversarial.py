@@ -362,6 +362,19 @@ def test_sil_rejects_bad_input_and_bad_state():
         SILConfig(expert_subsample=0)
     with pytest.raises(ValueError, match="reg"):
         SILConfig(reg=0.0)
+    # A float where an int belongs, or inf or NaN: refused when the config is made (a settings
+    # file goes through dataclasses.replace, which checks no types).
+    import dataclasses
+
+    for config in (SILConfig(), AdversarialOOPSConfig()):
+        for bad, match in (
+            ({"max_iter": 1e5}, "max_iter must be an int >= 1"),
+            ({"tol": float("inf")}, "tol must be positive and finite"),
+            ({"critic_lr": float("nan")}, "critic_lr must be positive and finite"),
+        ):
+            with pytest.raises(ValueError, match=match):
+                dataclasses.replace(config, **bad)
+    assert SILConfig(obs_clip=float("inf")).obs_clip == float("inf")  # no clipping
     sil = SIL(_demos())
     with pytest.raises(ValueError, match="dimension"):
         sil(np.zeros((10, OBS_DIM + 1)))

@@ -18,12 +18,18 @@ USAGE_LINES_SHOWN_WITH_AN_ERROR = 6
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse's parser, except that a bad argument is not buried under a long usage."""
+    """argparse's parser, except that a bad argument is not buried under a long usage.
+
+    ``help_command``: the command whose ``--help`` lists the options (default: this parser's
+    prog), for a parser whose prog is not a command of its own."""
+
+    help_command: str | None = None
 
     def error(self, message: str) -> NoReturn:
         usage = self.format_usage()
         if usage.count("\n") > USAGE_LINES_SHOWN_WITH_AN_ERROR:
-            usage = f"usage: {self.prog} [options]  (all of them: {self.prog} --help)\n"
+            command = self.help_command or self.prog
+            usage = f"usage: {self.prog} [options]  (all of them: {command} --help)\n"
         sys.stderr.write(usage)
         self.exit(2, f"{self.prog}: error: {message}\n")
 

@@ -98,7 +98,9 @@ def _train_settings(rest: list[str]) -> dict[str, Any]:
     from ilfo.training import TrainConfig
 
     parser = Parser(prog="ilfo sweep run DIR [ilfo train flags]")
-    _add_train_parser(parser.add_subparsers())
+    commands = parser.add_subparsers()
+    _add_train_parser(commands)
+    commands.choices["train"].help_command = "ilfo train"  # its prog is no command
     args = parser.parse_args(["train", *rest])
     if args.resume is not None:
         raise ValueError("ilfo sweep run resumes its runs itself: drop --resume")

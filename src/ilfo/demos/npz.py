@@ -86,7 +86,8 @@ def save(
     is written can be read back), and atomically: a crash part-way leaves any old file whole.
 
     ``compact``: observations and actions as float32 where ``float32_is_lossless`` (half the
-    size); False keeps the episodes' dtypes. Actions, rewards and terminated are kept where
+    size); False keeps their float dtypes (integer observations are written as float64, as
+    ``load`` would read them; 1-D actions as (T, 1)). Actions, rewards and terminated are kept where
     every episode has them; a ValueError where only some do (they would be lost).
     """
     path = Path(path)
@@ -120,11 +121,12 @@ def save(
         for name in ("observations", "actions"):
             if name in arrays and float32_is_lossless(arrays[name]):
                 arrays[name] = arrays[name].astype(np.float32)
-    tmp = path.with_name(f".{path.name}.tmp")
+    target = path.resolve()  # through a symlink to its file, as numpy wrote
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")  # one per writing process
     try:
         with open(tmp, "wb") as file:  # a file object: numpy adds no suffix
             np.savez_compressed(file, **arrays)
-        os.replace(tmp, path)
+        os.replace(tmp, target)
     finally:
         tmp.unlink(missing_ok=True)
 

@@ -160,8 +160,9 @@ class OTReplayBuffer(ReplayBuffer):
         try:
             out = self.reward(observations)
         except ValueError as err:
-            if isinstance(getattr(self.reward, "obs_dim", None), int | np.integer):
-                raise  # its width was checked at construction: the error is about another thing
+            width_checked = isinstance(getattr(self.reward, "obs_dim", None), int | np.integer)
+            if width_checked or self.observation_columns is not None:
+                raise  # the hint below would not help
             raise ValueError(
                 f"the reward refused an episode of {steps} steps with observations of "
                 f"{observations.shape[1]} columns ({err}); if it expects fewer (e.g. not an "
@@ -237,6 +238,8 @@ def _check_reward_width(reward: Any, width: int, observation_columns: int | None
         f"the reward's demonstrations have observations of dimension {obs_dim}, but the "
         f"buffer would give it {given} columns of each observation"
     )
+    if obs_dim == width:
+        raise ValueError(f"{problem}: leave observation_columns None to give it all {width}")
     if obs_dim < width:
         raise ValueError(
             f"{problem}: set observation_columns={obs_dim} to give it the first {obs_dim} (e.g. "

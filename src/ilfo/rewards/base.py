@@ -128,6 +128,26 @@ def make_atoms(states: np.ndarray, atoms: Atoms) -> np.ndarray:
     raise ValueError(f"atoms must be 'transitions' or 'states', got {atoms!r}")
 
 
+def check_settings(
+    config: object, counts: Sequence[str] = (), positive: Sequence[str] = ()
+) -> None:
+    """A reward config's checks, run when it is made (not at a run's first episode, after the
+    trainer has written a run directory around it): the fields named in ``counts`` are ints
+    >= 1 or None, those in ``positive`` positive finite numbers."""
+    for name in counts:
+        value = getattr(config, name)
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+            raise ValueError(f"{name} must be an int >= 1, got {value!r}")
+    for name in positive:
+        value = getattr(config, name)
+        if isinstance(value, bool) or not isinstance(value, int | float | np.number):
+            raise ValueError(f"{name} must be a number, got {value!r}")
+        if not 0 < value < np.inf:
+            raise ValueError(f"{name} must be positive and finite, got {value!r}")
+
+
 def check_demos(demos: Sequence[np.ndarray]) -> list[np.ndarray]:
     """Validate expert demonstrations: a non-empty list of finite (T_i + 1, obs_dim) arrays."""
     if isinstance(demos, np.ndarray):

@@ -8,7 +8,6 @@ Defaults reproduce the paper's code (see docs/reproduction.md for where it depar
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -16,7 +15,6 @@ from typing import Literal
 import numpy as np
 
 from ilfo.ot import METRICS, SOLVERS, Metric, OTResult, Solver, cost_matrix, solve
-from ilfo.ot._checks import check_max_iter
 from ilfo.rewards.base import (
     Atoms,
     RewardOutput,
@@ -24,6 +22,7 @@ from ilfo.rewards.base import (
     Standardizer,
     check_demos,
     check_episode,
+    check_settings,
     make_atoms,
 )
 
@@ -78,12 +77,7 @@ class OOPSConfig:
             raise ValueError(
                 f"demo_selection must be random, pooled or nearest, got {self.demo_selection!r}"
             )
-        # Checked here, before a trainer writes a run directory around a config that fails.
-        for name in ("reg", "tol", "reward_scale"):
-            value = getattr(self, name)
-            if not 0 < value < math.inf:
-                raise ValueError(f"{name} must be positive and finite, got {value!r}")
-        check_max_iter(self.max_iter)
+        check_settings(self, counts=("max_iter",), positive=("reg", "tol", "reward_scale"))
 
 
 class OOPS:

@@ -38,6 +38,7 @@ from ilfo.rewards.base import (
     Standardizer,
     check_demos,
     check_episode,
+    check_settings,
     make_atoms,
 )
 
@@ -76,12 +77,11 @@ class AdversarialOOPSConfig:
         object.__setattr__(self, "critic_hidden", tuple(self.critic_hidden))
         if any(w < 1 for w in self.critic_hidden):
             raise ValueError(f"critic_hidden widths must be >= 1, got {self.critic_hidden}")
-        for name in ("critic_features", "max_iter", "critic_every"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("critic_lr", "reg", "tol", "reward_scale"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be positive, got {getattr(self, name)!r}")
+        check_settings(
+            self,
+            counts=("critic_features", "max_iter", "critic_every"),
+            positive=("critic_lr", "reg", "tol", "reward_scale"),
+        )
 
 
 @dataclass(frozen=True)

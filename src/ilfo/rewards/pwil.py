@@ -13,7 +13,6 @@ PWIL-(s) results were run with): it keeps every 20th state of each demo from a r
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -26,6 +25,7 @@ from ilfo.rewards.base import (
     Standardizer,
     check_demos,
     check_episode,
+    check_settings,
 )
 
 
@@ -51,21 +51,9 @@ class PWILConfig:
     """Draws the subsampling offsets. Set by the trainer: the run's seed."""
 
     def __post_init__(self) -> None:
-        for name in ("alpha", "beta"):
-            value = getattr(self, name)
-            if not 0 < value < math.inf:
-                raise ValueError(f"{name} must be positive and finite, got {value!r}")
-        for name, value in (
-            ("horizon", self.horizon),
-            ("subsample", self.subsample),
-            ("kernel_dim", self.kernel_dim),
-        ):
-            if value is not None and (_not_an_int(value) or value < 1):
-                raise ValueError(f"{name} must be an int >= 1, got {value!r}")
-
-
-def _not_an_int(value: object) -> bool:
-    return isinstance(value, bool) or not isinstance(value, (int, np.integer))
+        check_settings(
+            self, counts=("horizon", "subsample", "kernel_dim"), positive=("alpha", "beta")
+        )
 
 
 class PWIL:

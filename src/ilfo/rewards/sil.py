@@ -50,6 +50,7 @@ from ilfo.rewards.base import (
     Standardizer,
     check_demos,
     check_episode,
+    check_settings,
     make_atoms,
 )
 
@@ -96,10 +97,12 @@ class SILConfig:
         object.__setattr__(self, "critic_hidden", tuple(self.critic_hidden))
         if any(w < 1 for w in self.critic_hidden):
             raise ValueError(f"critic_hidden widths must be >= 1, got {self.critic_hidden}")
-        for name in ("critic_features", "max_iter", "expert_subsample"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("critic_lr", "reg", "tol", "reward_clip", "obs_clip"):
+        check_settings(
+            self,
+            counts=("critic_features", "max_iter", "expert_subsample"),
+            positive=("critic_lr", "reg", "tol"),
+        )
+        for name in ("reward_clip", "obs_clip"):  # inf: no clipping
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)!r}")
 

@@ -245,17 +245,19 @@ class Trainer:
         bar.close()
 
     def _report_unconverged(self, output: RewardOutput) -> None:
-        """Say once per process that a coupling missed its tolerance (its rewards are used as
+        """Say once per trainer that a coupling missed its tolerance (its rewards are used as
         they are); later ones are counted in ``unconverged_rewards``. At the paper's settings
         Sinkhorn converges in tens of iterations, so one that does not is worth a look."""
         self.unconverged_rewards += 1
         if self.unconverged_rewards == 1:
             coupling = output.coupling
+            solver = getattr(getattr(self.rewarder, "config", None), "solver", None)
+            advice = " A larger max_iter or reg converges sooner." if solver == "sinkhorn" else ""
             warnings.warn(
-                f"episode {self.episode}: the reward's coupling did not converge "
-                f"({coupling.iterations} iterations, marginal error "
+                f"episode {self.episode}: the reward's {solver or 'OT'} coupling did not "
+                f"converge ({coupling.iterations} iterations, marginal error "
                 f"{coupling.marginal_error:.3g}); its rewards are used as they are. Later "
-                "ones are not reported. A larger max_iter or reg converges sooner.",
+                f"ones are not reported (Trainer.unconverged_rewards counts them).{advice}",
                 stacklevel=2,
             )
 
