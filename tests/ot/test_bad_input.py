@@ -46,6 +46,9 @@ def test_bad_sinkhorn_parameters():
         sinkhorn(cost, init=(np.zeros(3), np.zeros(2)))
     with pytest.raises(ValueError, match="acceleration"):
         sinkhorn(cost, acceleration="anderson")
+    for tol in (0.0, -1e-9, np.inf, np.nan):  # inf would stop at once and call it converged
+        with pytest.raises(ValueError, match="tol must be a positive finite number"):
+            sinkhorn(cost, tol=tol)
 
 
 @pytest.mark.parametrize("solve", [sinkhorn, emd])

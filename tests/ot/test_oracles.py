@@ -127,6 +127,21 @@ def test_greedy_splits_mass_across_expert_atoms():
     assert result.cost == pytest.approx(1.0)
 
 
+@pytest.mark.parametrize("mass", [1e-16, 1e8])
+def test_greedy_scales_with_the_weights(mass):
+    # Its thresholds are relative to the mass: at 1e-16 every atom used to count as already
+    # spent (an empty plan called converged), at 1e8 rounding leftovers as unspent.
+    rng = np.random.default_rng(1)
+    cost = rng.random((40, 60))
+    a, b = rng.random(40), rng.random(60)
+    a, b = a / a.sum() * 0.7, b / b.sum()  # PWIL's case: a short episode moves less than b
+    unit = greedy(cost, a, b)
+    scaled = greedy(cost, a * mass, b * mass)
+    assert unit.converged and scaled.converged
+    np.testing.assert_allclose(scaled.plan / mass, unit.plan, rtol=1e-9, atol=1e-15)
+    assert np.count_nonzero(scaled.plan) == np.count_nonzero(unit.plan)
+
+
 def test_solve_dispatches_to_each_solver_by_name():
     from ilfo.ot import emd, greedy, sinkhorn, solve
 

@@ -62,6 +62,11 @@ def rebalance(a: np.ndarray, b: np.ndarray, rtol: float = 0.0) -> np.ndarray:
 
 def check_max_iter(max_iter: int) -> int:
     """An iteration limit: an int >= 1 (a float such as 1e4 or 100.5 is refused, not truncated)."""
-    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
-        raise ValueError(f"max_iter must be an int >= 1, got {max_iter!r}")
-    return int(max_iter)
+    return check_count(max_iter, "max_iter")
+
+
+def check_count(value: int, name: str) -> int:
+    """A count named ``name``: an int >= 1 (a bool, or a float such as 1e4, is refused)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ValueError(f"{name} must be an int >= 1, got {value!r}")
+    return int(value)

@@ -87,8 +87,8 @@ def sinkhorn(
     cost, a, b = check_problem(cost, a, b)
     if not (np.isfinite(reg) and reg > 0):
         raise ValueError(f"reg must be a positive finite number, got {reg!r}")
-    if not tol > 0:
-        raise ValueError(f"tol must be positive, got {tol!r}")
+    if not (np.isfinite(tol) and tol > 0):
+        raise ValueError(f"tol must be a positive finite number, got {tol!r}")
     max_iter = check_max_iter(max_iter)
     if acceleration not in ("newton", "overrelax", "none"):
         raise ValueError(

@@ -16,6 +16,7 @@ from typing import Any, Literal, Protocol
 import numpy as np
 
 from ilfo.ot import OTResult
+from ilfo.ot._checks import check_count
 
 Atoms = Literal["transitions", "states"]
 
@@ -135,11 +136,8 @@ def check_settings(
     trainer has written a run directory around it): the fields named in ``counts`` are ints
     >= 1 or None, those in ``positive`` positive finite numbers."""
     for name in counts:
-        value = getattr(config, name)
-        if value is None:
-            continue
-        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
-            raise ValueError(f"{name} must be an int >= 1, got {value!r}")
+        if getattr(config, name) is not None:
+            check_count(getattr(config, name), name)
     for name in positive:
         value = getattr(config, name)
         if isinstance(value, bool) or not isinstance(value, int | float | np.number):
