@@ -389,6 +389,10 @@ def test_updates_per_step_sets_the_update_count(tmp_path, updates_per_step):
 def test_updates_per_step_below_one_is_an_error():
     with pytest.raises(ValueError, match="updates_per_step must be >= 1"):
         TrainConfig(**{**TINY, "updates_per_step": 0})
+    # On-policy TRPO (sil) learns once per batch: more updates per step would be ignored.
+    with pytest.raises(ValueError, match="updates_per_step does not apply to algo 'sil'"):
+        TrainConfig(**{**TINY, "algo": "sil", "updates_per_step": 4})
+    assert TrainConfig(**{**TINY, "algo": "sil"}).updates_per_step == 1
 
 
 @pytest.mark.parametrize(

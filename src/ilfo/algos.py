@@ -72,6 +72,9 @@ class AgentPart(Part):
     """``make_learning(config, obs_dim, action_dim, max_action, setup)`` -> the agent's functions
     trained on a learned reward (``setup``: ``ilfo.training.learned.LearnedRewardSetup``);
     None: the agent cannot use one."""
+    on_policy: bool = False
+    """Whether it learns from batches of its own fresh episodes (TRPO), not from a replay
+    buffer: ``TrainConfig.updates_per_step`` does not apply to it."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -225,11 +228,12 @@ AGENT_PARTS: dict[str, AgentPart] = {
         make=make_trpo,
         default=lambda preset: TRPOConfig(),
         for_run=lambda config, horizon, fixed_horizon: config,
+        on_policy=True,
         title="TRPO agent (on-policy)",
         description="Defaults: the SIL authors' TRPO (Khrylx/PyTorch-RL as SIL ran it, its "
         "Fisher-vector product included), and a KL check in the line search (ilfo's). It "
-        "learns from batches of its own episodes: --start-steps, --updates-per-step and "
-        "--replay-capacity do not apply.",
+        "learns from batches of its own episodes: --start-steps and --replay-capacity do not "
+        "apply, and --updates-per-step other than 1 is an error.",
     ),
 }
 """The agents, by the name of their ``TrainConfig`` field."""

@@ -8,7 +8,10 @@ report. Budgets:
   task, proving the pipeline end to end (CI runs table1's).
 - ``small``: what 2 cores do in about a day: fewer tasks, seeds and steps (300k, the fast
   preset), chosen so that the comparison still says something (the paper's learning curves
-  separate the algorithms well before 300k on Hopper, Walker2d and HalfCheetah).
+  separate the algorithms well before 300k on Hopper, Walker2d and HalfCheetah). The
+  experiments of OOPS+TD3 alone (table4's variants, solvers) take four updates per step, not
+  the paper's one: at one, most Hopper seeds are still on their plateau at 300k
+  (``SMALL_OOPS_CONFIG``).
 - ``full``: the paper's protocol (1M steps, 5 seeds, 1/4/10 demos, the paper preset).
 
 Algorithms that ilfo has not built yet are left out with one line saying so, and join the
@@ -59,22 +62,37 @@ SMOKE_CONFIG: dict[str, Any] = {
 }
 """Tiny runs: seconds of training each (their scores mean nothing)."""
 SMALL_CONFIG: dict[str, Any] = {"steps": 300_000, "preset": "fast"}
+SMALL_OOPS_CONFIG: dict[str, Any] = {**SMALL_CONFIG, "updates_per_step": 4}
+"""The small budget of the experiments that compare OOPS+TD3 with itself (table4, solvers).
+With the paper's one update per step OOPS+TD3 on Hopper sits on its plateau (standing,
+falling) to 300k for most seeds: 0.17 +- 0.25 of the expert over seeds 0-7, one above 0.8, so
+the variants would be compared on plateaus; with four, 0.85 +- 0.26, seven of eight above 0.8
+(docs/benchmarks.md, "updates per step"), at about three times the compute per step.
+On-policy algos (sil) keep one: ``updates_per_step`` does not apply to them."""
 FULL_CONFIG: dict[str, Any] = {"steps": 1_000_000, "preset": "paper"}
 
 STEPS_PER_CORE_SECOND: dict[str, float] = {
-    "oops-td3": 147.0,
-    "oops-ddpg": 147.0,
+    "oops-td3": 300.0,
+    "oops-ddpg": 300.0,
     "oops-sac": 120.0,
-    "pwil-td3": 147.0,
+    "pwil-td3": 300.0,
     "gaifo-td3": 92.0,
     "opolo": 70.0,
     "firl-fkl": 77.0,
     "oops-adv-td3": 140.0,
     "sil": 300.0,
 }
-"""For the estimate only: half the 2-core loop rates of ``bench/train.py`` (docs/benchmarks.md,
-2026-12-01; fast preset, Hopper); the paper preset runs at about a third of the fast one.
-oops-adv-td3 and sil: from short probes on Hopper (2026-12-02, docs/benchmarks.md)."""
+"""For the estimate only, steps per second of one core at the fast preset. oops-td3, oops-ddpg
+and pwil-td3: the 8-task sweep's 1M-step Walker2d runs, each pinned to one core beside another
+run, evaluations included (320 and 332 steps/s, 2026-12-04, docs/benchmarks.md); the others
+half the 2-core loop rates of ``bench/train.py`` (docs/benchmarks.md, 2026-12-01; Hopper), and
+oops-adv-td3 and sil from short probes on Hopper (2026-12-02), so likely on the low side. The
+paper preset runs at about a third of the fast one."""
+UPDATE_SHARE: dict[str, float] = {"fast": 0.7, "paper": 0.96}
+"""For the estimate only: the share of an off-policy step's time spent in its update at one
+update per step, by preset (``bench/train.py``, docs/benchmarks.md: at the fast preset the loop
+ran 1070, 624 and 361 steps/s at one, two and four updates per step; at the paper preset the
+updates were 96% of a step). N updates per step cost (1 - share) + share * N times as much."""
 
 
 @dataclass(frozen=True)
@@ -127,7 +145,7 @@ class Plan:
                     "pwil-td3",
                 ):
                     rate /= 3
-                seconds += run.steps / rate
+                seconds += run.steps / rate * _updates_cost(run.config)
         if self.calibration is not None:  # ~1,500 env + policy steps/s and ~0.1 s per solve
             cal = self.calibration
             seconds += cal.rollouts * ((cal.horizon or 1000) / 1500 + 0.1)
@@ -154,6 +172,21 @@ class Plan:
         amount = f"{hours:.1f} core-hours" if hours >= 1 else f"{60 * hours:.1f} core-minutes"
         lines.append(f"  estimated {amount} of compute (rates of docs/benchmarks.md)")
         return "\n".join(lines)
+
+
+def _updates_cost(config: dict[str, Any]) -> float:
+    """How many times a step at one update per step a run's step costs (``UPDATE_SHARE``)."""
+    updates = config.get("updates_per_step", 1)
+    if updates == 1 or _on_policy(config["algo"]):
+        return 1.0
+    share = UPDATE_SHARE[config.get("preset", "paper")]
+    return (1 - share) + share * updates
+
+
+def _on_policy(algo: str) -> bool:
+    from ilfo.algos import AGENT_PARTS, ALGOS
+
+    return AGENT_PARTS[ALGOS[algo].agent].on_policy
 
 
 def _built(algos: tuple[str, ...]) -> tuple[tuple[str, ...], list[str]]:
@@ -224,7 +257,7 @@ def _table4(budget: Budget) -> Plan:
         left_out.append("the other variants: the small and full budgets")
     elif budget == "small":
         axes = {"env": ("Hopper-v5",), "num_demos": (10,), "seed": (0, 1)}
-        config = SMALL_CONFIG
+        config = SMALL_OOPS_CONFIG
         left_out.append("the other four tasks: the full budget only")
     else:
         axes = {"env": MUJOCO, "num_demos": (10,), "seed": (0, 1, 2, 3, 4)}
@@ -235,8 +268,13 @@ def _table4(budget: Budget) -> Plan:
     }
     algos, not_built = _built(TABLE4_ALGOS)
     left_out[:0] = not_built
-    if algos:
-        sweeps["algos"] = SweepSpec(algo=algos, config=config, **axes)
+    off_policy = tuple(a for a in algos if not _on_policy(a))
+    on_policy = tuple(a for a in algos if _on_policy(a))
+    if off_policy:
+        sweeps["algos"] = SweepSpec(algo=off_policy, config=config, **axes)
+    if on_policy:  # SIL's TRPO: the same runs, but updates per step do not apply to it
+        learns_per_batch = {k: v for k, v in config.items() if k != "updates_per_step"}
+        sweeps["on_policy"] = SweepSpec(algo=on_policy, config=learns_per_batch, **axes)
     return Plan("table4", budget, sweeps, tuple(left_out))
 
 
@@ -275,7 +313,7 @@ def _solvers(budget: Budget) -> Plan:
             config={**SMOKE_CONFIG, **_smoke_demos("Hopper-v5")},
         )
     elif budget == "small":
-        spec = SweepSpec(algo=("oops-td3",), num_demos=(10,), config=SMALL_CONFIG)
+        spec = SweepSpec(algo=("oops-td3",), num_demos=(10,), config=SMALL_OOPS_CONFIG)
         left_out.append("the other four tasks (the appendix's figure): the full budget")
     else:
         spec = SweepSpec(env=MUJOCO, algo=("oops-td3",), num_demos=(10,), config=FULL_CONFIG)

@@ -52,7 +52,8 @@ class TrainConfig:
     updates_per_step: int = 1
     """Agent updates per environment step collected (the update-to-data ratio), run after each
     episode; 1 is the paper's. More spends compute to learn more from the same data. Off-policy
-    agents only (TRPO learns once per batch: ``--trpo-batch-steps``)."""
+    agents only: other than 1 is an error for TRPO (sil), which learns once per batch
+    (``--trpo-batch-steps``)."""
     preset: Literal["paper", "fast"] = "paper"
     """TD3/DDPG hyperparameters: paper (critics 1024-1024) or fast (critics 256-256); ``td3``
     (the --td3-* flags) changes single ones."""
@@ -160,6 +161,13 @@ class TrainConfig:
         for name in counts:
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if AGENT_PARTS[algo.agent].on_policy and self.updates_per_step != 1:
+            # Ignored, it would make a sweep's updates-per-step comparison silently wrong.
+            raise ValueError(
+                f"updates_per_step does not apply to algo {self.algo!r}: its on-policy "
+                f"{algo.agent.upper()} agent learns once per batch of its own episodes "
+                f"(--{algo.agent}-batch-steps); leave it at 1"
+            )
         if self.start_steps is not None and self.start_steps < 0:
             raise ValueError(f"start_steps must be >= 0, got {self.start_steps}")
         if self.seed < 0:
