@@ -4,6 +4,7 @@ metrics files against hand-computed aggregates and the paper's numbers."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 
 import numpy as np
@@ -185,6 +186,47 @@ def test_runs_whose_reward_settings_differ_from_the_algos_are_a_cell_of_their_ow
     report = build_report(runs, resamples=100)
     assert report.cell("Walker2d-v5", "pwil-td3", 1).versus_paper is not None
     assert len(report.cell("Walker2d-v5", "pwil-td3", 1).runs) == 3
+
+
+def test_a_cell_names_its_training_settings_and_warns_when_its_runs_differ(tmp_path):
+    """Runs trained otherwise than the defaults say how (the preset where it changes the agent,
+    steps, updates per step, agent fields); a cell whose runs differ warns and names the seeds,
+    rather than averaging two protocols silently."""
+
+    def run_with(name, algo, seed, **settings):
+        run = _fake_run(tmp_path, name, env="Hopper-v5", algo=algo, seed=seed, scores=[0.5])
+        config = json.loads((run / "config.json").read_text())
+        (run / "config.json").write_text(json.dumps({**config, "steps": 1_000_000, **settings}))
+
+    run_with("a", "oops-td3", 0, preset="fast")
+    run_with("b", "oops-td3", 1, preset="fast", updates_per_step=4)
+    from ilfo.training import TrainConfig
+
+    td3 = dataclasses.asdict(TrainConfig(preset="fast").part_config("td3"))  # as runs write it
+    run_with("c", "oops-td3", 2, preset="fast", td3={**td3, "batch_size": 128}, steps=300_000)
+    run_with("d", "opolo", 0, preset="fast")  # OPOLO's agent is the same at either preset
+    runs, _ = collect_runs([tmp_path])
+    assert {(r.algo, r.seed): r.settings for r in runs} == {
+        ("oops-td3", 0): ("fast preset",),
+        ("oops-td3", 1): ("fast preset", "4 updates/step"),
+        ("oops-td3", 2): ("fast preset", "300k steps", "td3.batch_size=128"),
+        ("opolo", 0): (),
+    }
+    with pytest.warns(UserWarning, match=r"Hopper-v5 oops-td3 demos 1: .*different settings"):
+        report = build_report(runs, resamples=100)
+    cell = report.cell("Hopper-v5", "oops-td3", 1)
+    assert cell.settings == ("fast preset",)
+    assert cell.settings_text == (
+        "fast preset; 4 updates/step (seeds 1 only); 300k steps (seeds 2 only); "
+        "td3.batch_size=128 (seeds 2 only)"
+    )
+    write_report(report, tmp_path / "report")
+    rows = {r["algo"]: r for r in csv.DictReader((tmp_path / "report" / "cells.csv").open())}
+    assert rows["oops-td3"]["settings"] == cell.settings_text and rows["opolo"]["settings"] == ""
+    assert (
+        "| fast preset; 4 updates/step (seeds 1 only);"
+        in (tmp_path / "report" / "report.md").read_text()
+    )
 
 
 def test_report_over_a_fixture_against_hand_computations(tmp_path):

@@ -57,6 +57,10 @@ class RunResult:
     shipped_demos: bool = True
     """Whether it imitated the env's shipped expert demos (the only ones the paper's numbers
     can be compared with)."""
+    settings: tuple[str, ...] = ()
+    """Where it was trained otherwise than ``ilfo train``'s defaults for its task and algo (the
+    paper's protocol), e.g. ``("fast preset", "4 updates/step")``: what the cell key does not
+    say (its reward settings and observations are its variant, its demos ``shipped_demos``)."""
 
     @property
     def final_step(self) -> int:
@@ -155,6 +159,49 @@ def _reward_settings_variant(config: dict[str, Any], source: Path) -> str | None
     return "+".join(changed) or None
 
 
+def _training_settings(config: dict[str, Any], source: Path) -> tuple[str, ...]:
+    """Labels of a run's training settings that differ from ``ilfo train``'s defaults for its
+    env and algo: the preset, steps, updates per step, episodes, and its agent's fields."""
+    from ilfo.algos import AGENT_PARTS
+    from ilfo.training.config import TrainConfig, config_from_dict
+
+    run = config_from_dict(config, source)
+    default = TrainConfig(env=run.env, algo=run.algo, seed=run.seed)
+    agent = run.recipe.agent
+    # The agent's fields are compared with its defaults at the run's preset, named when it
+    # changes them (SAC, OPOLO and f-IRL's agents have one config at either preset).
+    preset_default = dataclasses.replace(default, preset=run.preset)
+    labels = []
+    if preset_default.part_config(agent) != default.part_config(agent):
+        labels.append(f"{run.preset} preset")
+    if run.steps != default.steps:
+        labels.append(f"{_steps_label(run.steps)} steps")
+    if run.updates_per_step != default.updates_per_step:
+        labels.append(f"{run.updates_per_step} updates/step")
+    if run.uses_fixed_horizon != default.uses_fixed_horizon:
+        labels.append("fixed horizon" if run.uses_fixed_horizon else "standard episodes")
+    for name in ("random_steps", "horizon", "healthy_angle_range", "replay_capacity"):
+        if getattr(run, name) != getattr(default, name):
+            labels.append(f"{name}={_setting_label(getattr(run, name))}")
+    if run.eval_episodes != default.eval_episodes:
+        labels.append(f"{run.eval_episodes} evaluation episodes")
+    given, usual = run.part_config(agent), preset_default.part_config(agent)
+    set_by_trainer = AGENT_PARTS[agent].set_by_trainer
+    labels += [
+        f"{agent}.{f.name}={_setting_label(getattr(given, f.name))}"
+        for f in dataclasses.fields(given)
+        if f.name not in set_by_trainer and getattr(given, f.name) != getattr(usual, f.name)
+    ]
+    return tuple(labels)
+
+
+def _steps_label(steps: int) -> str:
+    for size, suffix in ((1_000_000, "M"), (1_000, "k")):
+        if steps >= size and steps % (size // 100) == 0:
+            return f"{steps / size:g}{suffix}"
+    return str(steps)
+
+
 def _setting_label(value: Any) -> str:
     if isinstance(value, float):
         return format(value, "g")
@@ -198,6 +245,7 @@ def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | Non
         curve_scores=np.array([float(r[SCORE]) for r in rows]),
         final_return=float(rows[-1][RETURN]) if rows[-1].get(RETURN) else math.nan,
         shipped_demos=shipped,
+        settings=_training_settings(config, run_dir / "config.json"),
     )
 
 
@@ -266,6 +314,34 @@ class Cell:
     @property
     def finished(self) -> bool:
         return all(r.finished for r in self.runs)
+
+    @property
+    def settings(self) -> tuple[str, ...]:
+        """The training settings, other than the defaults, that all its runs share."""
+        shared = set.intersection(*(set(r.settings) for r in self.runs))
+        return tuple(label for label in self.runs[0].settings if label in shared)
+
+    @property
+    def mixed_settings(self) -> dict[str, tuple[int, ...]]:
+        """Settings that only some of its runs have, each with those runs' seeds: runs trained
+        otherwise, averaged as if they were seeds of one setting."""
+        shared = set(self.settings)
+        mixed: dict[str, tuple[int, ...]] = {}
+        for run in self.runs:
+            for label in run.settings:
+                if label not in shared:
+                    mixed[label] = (*mixed.get(label, ()), run.seed)
+        return mixed
+
+    @property
+    def settings_text(self) -> str:
+        """``settings``, then any ``mixed_settings`` with their seeds."""
+        parts = list(self.settings)
+        parts += [
+            f"{label} (seeds {' '.join(map(str, seeds))} only)"
+            for label, seeds in self.mixed_settings.items()
+        ]
+        return "; ".join(parts)
 
     @property
     def versus_paper(self) -> str:
@@ -347,11 +423,20 @@ def build_report(
     cells = []
     for (env, algo, num_demos, variant), members in grouped.items():
         members.sort(key=lambda r: r.seed)
+        cell_name = f"{env} {algo} demos {num_demos}{f' {variant}' if variant else ''}"
         seeds = [r.seed for r in members]
         if len(set(seeds)) != len(seeds):
             warnings.warn(
-                f"{env} {algo} demos {num_demos}{f' {variant}' if variant else ''}: seeds "
-                f"{seeds} repeat (the same runs found twice?); each counts",
+                f"{cell_name}: seeds {seeds} repeat (the same runs found twice?); each counts",
+                stacklevel=2,
+            )
+        mixed = {label for run in members for label in run.settings} - set.intersection(
+            *(set(run.settings) for run in members)
+        )
+        if mixed:
+            warnings.warn(
+                f"{cell_name}: its runs were trained with different settings "
+                f"({', '.join(sorted(mixed))}); they are averaged as seeds of one cell",
                 stacklevel=2,
             )
         scores = np.array([r.final_score for r in members])
@@ -474,6 +559,7 @@ def cell_rows(report: Report) -> list[dict[str, object]]:
                 "paper_source": "" if c.paper is None else c.paper.where,
                 "versus_paper": c.versus_paper,
                 "seeds_list": " ".join(str(r.seed) for r in c.runs),
+                "settings": c.settings_text,
             }
         )
     return rows
@@ -510,20 +596,21 @@ def write_report(report: Report, out: str | Path, *, sources: Sequence[str] = ()
         "fixed-horizon score normalised by the demos' mean return (the paper's); mean +- std "
         f"over seeds (population std); IQM with a 95% stratified-bootstrap interval "
         f"({report.resamples} resamples, percentile). `vs paper`: within, above or below the "
-        "paper's mean +- 2 std (Tables 1-2).",
+        "paper's mean +- 2 std (Tables 1-2). `settings`: where the runs were trained otherwise "
+        "than `ilfo train`'s defaults (the paper's protocol).",
         "",
         "## Final performance",
         "",
         "| task | algo | demos | variant | seeds | mean ± std | IQM [95% CI] | return (norm.) "
-        "| paper | vs paper |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| paper | vs paper | settings |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for c, row in zip(report.cells, cells, strict=True):
         paper = "" if c.paper is None or c.variant else c.paper.text
         lines.append(
             f"| {c.env} | {c.algo} | {c.num_demos} | {c.variant or ''} | {_seeds_text(c)} | "
             f"{_fmt(c.mean)} ± {_fmt(c.std)} | {c.iqm} | {_fmt(row['return_norm_mean'])} | "
-            f"{paper} | {c.versus_paper} |"
+            f"{paper} | {c.versus_paper} | {c.settings_text} |"
         )
     variants = [
         (c, report.percent_difference(c))
