@@ -125,6 +125,10 @@ def test_resolved_config_builds_the_same_agent_and_rewarder():
             assert resolved.part_config("oops") == config.part_config("oops")
             assert resolved.part_config("pwil") == config.part_config("pwil")
             assert resolved.resolved(100) == resolved  # idempotent
+            # The episodes as resolved now: a later change of the algo's default (f-IRL's
+            # was) cannot change how a resumed run's episodes end.
+            assert resolved.fixed_horizon == config.uses_fixed_horizon
+    assert TrainConfig(algo="firl-fkl").resolved(100).fixed_horizon is False
 
 
 def test_default_agent_and_rewarder_configs_are_the_presets():

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from scipy import stats as scipy_stats
 
+from ilfo.algos import ALGOS
 from ilfo.experiments import stats
 from ilfo.experiments.paper import paper_ablation, paper_cells, paper_score
 from ilfo.experiments.report import (
@@ -188,6 +189,25 @@ def test_runs_whose_reward_settings_differ_from_the_algos_are_a_cell_of_their_ow
     assert len(report.cell("Walker2d-v5", "pwil-td3", 1).runs) == 3
 
 
+def _written_config(**settings):
+    """A config as a run writes it (every part resolved as the trainer builds it)."""
+    from ilfo.training import TrainConfig
+
+    return dataclasses.asdict(TrainConfig(env="Hopper-v5", **settings).resolved(1000))
+
+
+@pytest.mark.parametrize("algo", sorted(ALGOS))
+def test_a_run_at_the_defaults_has_no_settings_to_name(algo, tmp_path):
+    # What the trainer itself sets (DDPG's TD3 fields, the time augmentation of fixed-horizon
+    # runs, max_time) is not a change; nor is a preset that does not change the agent.
+    run = _fake_run(tmp_path, "r", env="Hopper-v5", algo=algo, seed=0, scores=[0.5])
+    (run / "config.json").write_text(json.dumps(_written_config(algo=algo)))
+    assert read_run(run).settings == ()
+    (run / "config.json").write_text(json.dumps(_written_config(algo=algo, preset="fast")))
+    uses_preset = algo in ("oops-td3", "oops-ddpg", "pwil-td3", "oops-adv-td3", "td3")
+    assert read_run(run).settings == (("fast preset",) if uses_preset else ())
+
+
 def test_a_cell_names_its_training_settings_and_warns_when_its_runs_differ(tmp_path):
     """Runs trained otherwise than the defaults say how (the preset where it changes the agent,
     steps, updates per step, agent fields); a cell whose runs differ warns and names the seeds,
@@ -195,22 +215,24 @@ def test_a_cell_names_its_training_settings_and_warns_when_its_runs_differ(tmp_p
 
     def run_with(name, algo, seed, **settings):
         run = _fake_run(tmp_path, name, env="Hopper-v5", algo=algo, seed=seed, scores=[0.5])
-        config = json.loads((run / "config.json").read_text())
-        (run / "config.json").write_text(json.dumps({**config, "steps": 1_000_000, **settings}))
+        config = _written_config(algo=algo, seed=seed, preset="fast", **settings)
+        (run / "config.json").write_text(json.dumps(config))
 
-    run_with("a", "oops-td3", 0, preset="fast")
-    run_with("b", "oops-td3", 1, preset="fast", updates_per_step=4)
-    from ilfo.training import TrainConfig
+    from ilfo.agents.td3 import TD3Config
 
-    td3 = dataclasses.asdict(TrainConfig(preset="fast").part_config("td3"))  # as runs write it
-    run_with("c", "oops-td3", 2, preset="fast", td3={**td3, "batch_size": 128}, steps=300_000)
-    run_with("d", "opolo", 0, preset="fast")  # OPOLO's agent is the same at either preset
+    run_with("a", "oops-td3", 0)
+    run_with("b", "oops-td3", 1, updates_per_step=4)
+    td3 = dataclasses.replace(TD3Config.fast(), batch_size=128)
+    run_with("c", "oops-td3", 2, td3=td3, steps=300_000, fixed_horizon=False)
+    run_with("d", "opolo", 0)  # OPOLO's agent is the same at either preset
+    run_with("e", "sil", 0)
     runs, _ = collect_runs([tmp_path])
     assert {(r.algo, r.seed): r.settings for r in runs} == {
         ("oops-td3", 0): ("fast preset",),
         ("oops-td3", 1): ("fast preset", "4 updates/step"),
-        ("oops-td3", 2): ("fast preset", "300k steps", "td3.batch_size=128"),
+        ("oops-td3", 2): ("fast preset", "300k steps", "standard episodes", "td3.batch_size=128"),
         ("opolo", 0): (),
+        ("sil", 0): (),
     }
     with pytest.warns(UserWarning, match=r"Hopper-v5 oops-td3 demos 1: .*different settings"):
         report = build_report(runs, resamples=100)
@@ -218,15 +240,16 @@ def test_a_cell_names_its_training_settings_and_warns_when_its_runs_differ(tmp_p
     assert cell.settings == ("fast preset",)
     assert cell.settings_text == (
         "fast preset; 4 updates/step (seeds 1 only); 300k steps (seeds 2 only); "
-        "td3.batch_size=128 (seeds 2 only)"
+        "standard episodes (seeds 2 only); td3.batch_size=128 (seeds 2 only)"
     )
     write_report(report, tmp_path / "report")
     rows = {r["algo"]: r for r in csv.DictReader((tmp_path / "report" / "cells.csv").open())}
     assert rows["oops-td3"]["settings"] == cell.settings_text and rows["opolo"]["settings"] == ""
-    assert (
-        "| fast preset; 4 updates/step (seeds 1 only);"
-        in (tmp_path / "report" / "report.md").read_text()
-    )
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "| fast preset; 4 updates/step (seeds 1 only);" in text
+    # SIL's Table 4 row compares it with OOPS+TD3, trained otherwise: the row says so.
+    (sil_row,) = [line for line in text.splitlines() if "| sil | 1 | sil |" in line]
+    assert sil_row.endswith(f"| this: defaults; oops-td3: {cell.settings_text} |")
 
 
 def test_report_over_a_fixture_against_hand_computations(tmp_path):

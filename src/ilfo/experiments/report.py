@@ -161,18 +161,24 @@ def _reward_settings_variant(config: dict[str, Any], source: Path) -> str | None
 
 def _training_settings(config: dict[str, Any], source: Path) -> tuple[str, ...]:
     """Labels of a run's training settings that differ from ``ilfo train``'s defaults for its
-    env and algo: the preset, steps, updates per step, episodes, and its agent's fields."""
+    env and algo: the preset, steps, updates per step, episodes, and its agent's fields. A
+    config this version cannot read raises (the report leaves the run out and says why)."""
     from ilfo.algos import AGENT_PARTS
     from ilfo.training.config import TrainConfig, config_from_dict
 
     run = config_from_dict(config, source)
     default = TrainConfig(env=run.env, algo=run.algo, seed=run.seed)
     agent = run.recipe.agent
-    # The agent's fields are compared with its defaults at the run's preset, named when it
-    # changes them (SAC, OPOLO and f-IRL's agents have one config at either preset).
-    preset_default = dataclasses.replace(default, preset=run.preset)
+    # Agents are compared as runs build them (config.json records them so: DDPG's TD3 changes,
+    # the time augmentation of fixed-horizon runs), at the run's preset and episodes, which
+    # their own labels name; the preset only where it changes the agent (not SAC, OPOLO or the
+    # authors' settings of f-IRL and GAIfO).
+    horizon = run.horizon or 1000
+    alike = dataclasses.replace(default, preset=run.preset, fixed_horizon=run.uses_fixed_horizon)
     labels = []
-    if preset_default.part_config(agent) != default.part_config(agent):
+    if alike.agent_config(horizon) != dataclasses.replace(
+        alike, preset=default.preset
+    ).agent_config(horizon):
         labels.append(f"{run.preset} preset")
     if run.steps != default.steps:
         labels.append(f"{_steps_label(run.steps)} steps")
@@ -180,12 +186,13 @@ def _training_settings(config: dict[str, Any], source: Path) -> tuple[str, ...]:
         labels.append(f"{run.updates_per_step} updates/step")
     if run.uses_fixed_horizon != default.uses_fixed_horizon:
         labels.append("fixed horizon" if run.uses_fixed_horizon else "standard episodes")
-    for name in ("random_steps", "horizon", "healthy_angle_range", "replay_capacity"):
+    replay = () if AGENT_PARTS[agent].on_policy else ("random_steps", "replay_capacity")
+    for name in (*replay, "horizon", "healthy_angle_range"):
         if getattr(run, name) != getattr(default, name):
             labels.append(f"{name}={_setting_label(getattr(run, name))}")
     if run.eval_episodes != default.eval_episodes:
         labels.append(f"{run.eval_episodes} evaluation episodes")
-    given, usual = run.part_config(agent), preset_default.part_config(agent)
+    given, usual = run.agent_config(horizon), alike.agent_config(horizon)
     set_by_trainer = AGENT_PARTS[agent].set_by_trainer
     labels += [
         f"{agent}.{f.name}={_setting_label(getattr(given, f.name))}"
@@ -373,14 +380,21 @@ class Report:
         """A variant's mean final score relative to its default (the same task, algo and
         demos without a variant), in percent, as the paper's Table 4; for an algo that is a
         row of Table 4 (``TABLE4_ALGOS``), relative to OOPS+TD3's; None without one."""
+        base = self.base_cell(cell)
+        if base is None:
+            return None
+        return 100 * (cell.mean - base.mean) / abs(base.mean) if base.mean else None
+
+    def base_cell(self, cell: Cell) -> Cell | None:
+        """What ``percent_difference`` compares a cell with: for a variant, the same task, algo
+        and demos without one; for an algo of Table 4, OOPS+TD3's; None if absent."""
         if cell.variant is None and cell.algo not in TABLE4_ALGOS:
             return None
         base_algo = cell.algo if cell.variant else "oops-td3"
         try:
-            base = self.cell(cell.env, base_algo, cell.num_demos)
+            return self.cell(cell.env, base_algo, cell.num_demos)
         except KeyError:
             return None
-        return 100 * (cell.mean - base.mean) / abs(base.mean) if base.mean else None
 
     def groups(self) -> list[tuple[str, int, str | None]]:
         """(algo, num_demos, variant) in order of appearance."""
@@ -622,15 +636,23 @@ def write_report(report: Report, out: str | Path, *, sources: Sequence[str] = ()
             "",
             "## Variants (percent difference of the mean from the default run, as Table 4)",
             "",
-            "| task | algo | demos | variant | ilfo % | paper % (10 demos) |",
-            "|---|---|---|---|---|---|",
+            "| task | algo | demos | variant | ilfo % | paper % (10 demos) | trained otherwise |",
+            "|---|---|---|---|---|---|---|",
         ]
         for c, diff in variants:
             variant = c.variant or TABLE4_ALGOS[c.algo]
             paper_cell = c.paper if c.variant else paper_ablation(c.env, variant)
             paper = "" if paper_cell is None else paper_cell.text
+            base = report.base_cell(c)
+            otherwise = (
+                ""
+                if base is None or base.settings_text == c.settings_text
+                else f"this: {c.settings_text or 'defaults'}; "
+                f"{base.algo}: {base.settings_text or 'defaults'}"
+            )
             lines.append(
-                f"| {c.env} | {c.algo} | {c.num_demos} | {variant} | {_fmt(diff, 1)} | {paper} |"
+                f"| {c.env} | {c.algo} | {c.num_demos} | {variant} | {_fmt(diff, 1)} | {paper} "
+                f"| {otherwise} |"
             )
     lines += [
         "",

@@ -84,7 +84,8 @@ STEPS_PER_CORE_SECOND: dict[str, float] = {
 }
 """For the estimate only, steps per second of one core at the fast preset. oops-td3, oops-ddpg
 and pwil-td3: the 8-task sweep's 1M-step Walker2d runs, each pinned to one core beside another
-run, evaluations included (320 and 332 steps/s, 2026-12-04, docs/benchmarks.md); the others
+run, evaluations included (52 and 50 min: 320 and 332 steps/s, 2026-12-04, docs/benchmarks.md,
+"OOPS+TD3 and PWIL-(s) on the eight tasks"); the others
 half the 2-core loop rates of ``bench/train.py`` (docs/benchmarks.md, 2026-12-01; Hopper), and
 oops-adv-td3 and sil from short probes on Hopper (2026-12-02), so likely on the low side. The
 paper preset runs at about a third of the fast one."""
@@ -92,7 +93,9 @@ UPDATE_SHARE: dict[str, float] = {"fast": 0.7, "paper": 0.96}
 """For the estimate only: the share of an off-policy step's time spent in its update at one
 update per step, by preset (``bench/train.py``, docs/benchmarks.md: at the fast preset the loop
 ran 1070, 624 and 361 steps/s at one, two and four updates per step; at the paper preset the
-updates were 96% of a step). N updates per step cost (1 - share) + share * N times as much."""
+updates were 96% of a step). N updates per step cost (1 - share) + share * N times as much.
+Measured on TD3 and used for every off-policy algo: an algo whose step goes more to its reward
+(oops-adv-td3, opolo) is costed a little high."""
 
 
 @dataclass(frozen=True)
@@ -143,6 +146,7 @@ class Plan:
                     "oops-td3",
                     "oops-ddpg",
                     "pwil-td3",
+                    "oops-adv-td3",
                 ):
                     rate /= 3
                 seconds += run.steps / rate * _updates_cost(run.config)
@@ -186,7 +190,7 @@ def _updates_cost(config: dict[str, Any]) -> float:
 def _on_policy(algo: str) -> bool:
     from ilfo.algos import AGENT_PARTS, ALGOS
 
-    return AGENT_PARTS[ALGOS[algo].agent].on_policy
+    return algo in ALGOS and AGENT_PARTS[ALGOS[algo].agent].on_policy
 
 
 def _built(algos: tuple[str, ...]) -> tuple[tuple[str, ...], list[str]]:

@@ -268,6 +268,9 @@ class TrainConfig:
         return dataclasses.replace(
             self,
             start_steps=self.random_steps,
+            # Resolved, so that a later change of an algo's default episodes (f-IRL's was)
+            # cannot change how a resumed run's episodes end.
+            fixed_horizon=self.uses_fixed_horizon,
             # Recorded where the env has contact forces, so that a later default cannot change
             # what a resumed run observes; None elsewhere, where there is nothing to choose.
             contact_forces=self.observes_contact_forces
