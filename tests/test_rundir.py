@@ -8,6 +8,7 @@ import struct
 import subprocess
 import sys
 import threading
+import warnings
 
 import jax
 import numpy as np
@@ -468,12 +469,26 @@ def test_a_snapshot_taken_mid_refill_keeps_refilling(tmp_path):
     assert not rows[600]["critic_loss"] and rows[700]["critic_loss"]
 
 
-def test_an_on_policy_run_cannot_continue_from_a_snapshot(tmp_path):
+def test_an_on_policy_run_continues_exactly_from_a_snapshot(tmp_path):
+    """Its buffer is the batch collected since its last update, part of its state: the
+    snapshot keeps it (and a snapshot without it, from before, is refused clearly)."""
     from ilfo.training.run_dir import snapshot_run
 
     sil = dict(algo="sil", trpo={"hidden": (16, 16), "batch_steps": 200, "value_iters": 5},
                sil={"critic_hidden": (16, 16), "critic_features": 8})  # fmt: skip
-    run = _train(tmp_path, "run", steps=200, **sil)
+    full = _train(tmp_path, "full", steps=500, **sil)
+    run = _train(tmp_path, "run", steps=300, **sil)  # its checkpoint at 300, mid-batch
     out = snapshot_run(run, tmp_path / "carried")
-    with pytest.raises(ValueError, match="on-policy run"):
-        Trainer.resume(out, progress=False)
+    (ckpt,) = (out / "checkpoints").iterdir()
+    assert (ckpt / "replay.npz").is_file() and not (ckpt / "replay.omitted").exists()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no refill: nothing to warn of
+        resumed = Trainer.resume(out, progress=False, steps=500)
+    assert resumed.buffer.size > 0  # the batch pending at 300 (it updates at episode ends)
+    assert _metrics(resumed.train()) == _metrics(full)
+    older = snapshot_run(run, tmp_path / "older")  # as snapshots were before they kept it
+    (ckpt,) = (older / "checkpoints").iterdir()
+    (ckpt / "replay.npz").unlink()
+    (ckpt / "replay.omitted").write_text("{}")
+    with pytest.raises(ValueError, match="on-policy run keeps its pending batch"):
+        Trainer.resume(older, progress=False)

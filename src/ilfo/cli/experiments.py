@@ -85,7 +85,8 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
         "machines: its manifest, attempts, logs and each run's newest checkpoint without the "
         "replay buffer. `ilfo sweep run OUT` continues it: finished runs stay done, "
         "interrupted ones resume (their buffers refilled by start_steps steps of the current "
-        "policy), runs without a checkpoint start afresh.",
+        "policy; an on-policy run's pending batch is kept, and it continues exactly), runs "
+        "without a checkpoint start afresh.",
     )
     snapshot.add_argument("dir", help="a sweep directory, stopped (Ctrl-C checkpoints its runs)")
     snapshot.add_argument("out", help="the new directory")

@@ -225,8 +225,9 @@ def _add_snapshot_parser(sub: argparse._SubParsersAction) -> None:
             "Copy RUN_DIR's config, metrics, policies and newest checkpoint, without the "
             "replay buffer, to OUT. `ilfo train --resume OUT` continues it: the buffer is "
             "first refilled by --start-steps steps of the current policy (no updates), so the "
-            "continuation is close to, not exactly, the uninterrupted run's. For runs and "
-            "experts that outlive a machine (off-policy agents only)."
+            "continuation is close to, not exactly, the uninterrupted run's. An on-policy run "
+            "(sil) keeps its buffer, the batch pending since its last update, and continues "
+            "exactly. For runs and experts that outlive a machine."
         ),
     )
     p.add_argument("run_dir", help="the run directory")

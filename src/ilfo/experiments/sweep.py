@@ -356,10 +356,10 @@ def open_sweep(root: str | Path) -> Sweep:
 def snapshot_sweep(root: str | Path, out: str | Path) -> dict[str, str]:
     """A copy of a stopped sweep small enough to keep in git or move between machines: its
     manifest, attempts and logs, and each run that has a checkpoint as ``snapshot_run`` copies
-    it (no replay buffer). ``ilfo sweep run OUT`` continues it: finished runs stay done,
-    interrupted ones resume from their checkpoint (the buffer refilled by ``start_steps`` steps
-    of the current policy, so not the exact continuation), and runs without a checkpoint start
-    afresh.
+    it (no replay buffer; an on-policy run's pending batch is kept). ``ilfo sweep run OUT``
+    continues it: finished runs stay done, interrupted ones resume from their checkpoint (the
+    buffer refilled by ``start_steps`` steps of the current policy, so not the exact
+    continuation; on-policy runs exactly), and runs without a checkpoint start afresh.
 
     Returns what became of each run: ``done``, ``checkpoint at step N`` or ``left out (no
     checkpoint)``. Raises FileExistsError where ``out`` exists, and ValueError where it lies

@@ -579,9 +579,9 @@ class Trainer:
         if ckpt.buffer is None:  # a snapshot's checkpoint (run_dir.snapshot_run)
             if self.agent.on_policy:
                 raise ValueError(
-                    f"{path} has no replay buffer (a snapshot): an on-policy run keeps its "
-                    "pending batch there and cannot continue without it; continue the full run "
-                    "directory instead"
+                    f"{path} has no replay buffer (a snapshot taken before ilfo kept an "
+                    "on-policy run's): an on-policy run keeps its pending batch there and "
+                    "cannot continue without it; continue the full run directory instead"
                 )
             self.refill_until = ckpt.step + self.config.random_steps
             warnings.warn(

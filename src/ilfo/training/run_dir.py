@@ -322,13 +322,19 @@ def snapshot_run(run_dir: str | Path, out: str | Path) -> Path:
     the reward's state, a few MB; ``REPLAY_OMITTED`` in place of ``replay.npz``). TensorBoard
     events are left out (``metrics.csv`` has every row). ``Trainer.resume`` continues it: the
     buffer is refilled by ``start_steps`` steps of the current policy before updates resume, so
-    the continuation is not the exact one the full run directory gives.
+    the continuation is not the exact one the full run directory gives. An on-policy run (sil)
+    keeps its buffer, which holds only the batch it has collected since its last update (part
+    of its state, at most a batch and an episode): it continues exactly.
 
     Raises FileNotFoundError where ``run_dir`` has no complete checkpoint, FileExistsError
     where ``out`` exists, and ValueError where another process is writing the run or ``out``
     lies inside it."""
+    from ilfo.algos import AGENT_PARTS
+    from ilfo.training.config import config_from_dict
+
     run_dir, out = Path(run_dir), Path(out)
-    read_run_config(run_dir)  # a run directory, or a clear error
+    config = config_from_dict(read_run_config(run_dir), run_dir / CONFIG_FILE)
+    keeps_buffer = AGENT_PARTS[config.recipe.agent].on_policy
     with RunLock(run_dir):  # not while a trainer writes it: a checkpoint could be half-replaced
         damaged = newest_checkpoint_is_damaged(run_dir)
         if damaged is not None:
@@ -344,10 +350,13 @@ def snapshot_run(run_dir: str | Path, out: str | Path) -> Path:
             if (run_dir / name).is_file():
                 shutil.copy2(run_dir / name, tmp / name)
         target = tmp / CHECKPOINTS_DIR / checkpoint.name
-        shutil.copytree(checkpoint, target, ignore=shutil.ignore_patterns(REPLAY_FILE))
-        omitted = {"left_out": REPLAY_FILE, "from": str(run_dir.resolve() / CHECKPOINTS_DIR)}
-        if (checkpoint / REPLAY_FILE).is_file():
-            omitted["bytes"] = (checkpoint / REPLAY_FILE).stat().st_size
-        (target / REPLAY_OMITTED).write_text(json.dumps(omitted))
+        if keeps_buffer:
+            shutil.copytree(checkpoint, target)
+        else:
+            shutil.copytree(checkpoint, target, ignore=shutil.ignore_patterns(REPLAY_FILE))
+            omitted = {"left_out": REPLAY_FILE, "from": str(run_dir.resolve() / CHECKPOINTS_DIR)}
+            if (checkpoint / REPLAY_FILE).is_file():
+                omitted["bytes"] = (checkpoint / REPLAY_FILE).stat().st_size
+            (target / REPLAY_OMITTED).write_text(json.dumps(omitted))
         tmp.rename(out)
     return out
