@@ -171,9 +171,9 @@ def damaged_checkpoint_message(path: Path) -> str:
     missing = [name for name in CHECKPOINT_FILES if not (path / name).is_file()]
     if not missing:  # only the replay buffer is gone
         return (
-            f"checkpoint {path} has no {REPLAY_FILE} (removed?): put it back, or continue "
-            f"without it as from a snapshot (the buffer refilled by the policy) after `touch "
-            f"{path / REPLAY_OMITTED}`"
+            f"checkpoint {path} has no {REPLAY_FILE} (removed?): put it back, or (off-policy "
+            f"runs; an on-policy run needs its pending batch) continue without it as from a "
+            f"snapshot (the buffer refilled by the policy) after `touch {path / REPLAY_OMITTED}`"
         )
     return (
         f"checkpoint {path} lacks {', '.join(missing)}: put the files back, or delete the "
