@@ -199,8 +199,17 @@ def test_run_states_read_off_the_disk(tmp_path):
     assert states[c].state == "failed" and states[c].failures == 2 and states[c].error == "boom"
     assert states[c].step == 200
     assert states[d].state == "pending"
+    assert states[b].steps_per_s is None  # running, but no episodes yet to time
+    # A running run's speed over its recent rows (wall time in seconds), and its time left.
+    rows = ["step,episode,wall_time,eval_score", "100,1,10.0,", "200,2,12.0,0.5", "300,3,"]
+    (sweep.run_dir(b) / "metrics.csv").write_text("\n".join(rows))  # the last row half written
+    running = run_status(sweep, sweep.run(b))
+    assert running.steps_per_s == pytest.approx(50.0)
+    assert running.hours_left == pytest.approx((running.steps - running.step) / 50 / 3600)
+    assert states[c].steps_per_s is None and states[c].hours_left is None  # not running
     lock.release()
     assert run_status(sweep, sweep.run(b)).state == "pending"
+    assert run_status(sweep, sweep.run(b)).steps_per_s is None
     record_attempt(sweep, c, "reset")
     assert run_status(sweep, sweep.run(c)).state == "pending"
 

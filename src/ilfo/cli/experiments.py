@@ -240,7 +240,12 @@ def _run_sweep_status(args: argparse.Namespace) -> int:
     for s in statuses:
         error = f"  {s.error}" if s.error and s.state != "done" else ""
         failures = f"  failures {s.failures}" if s.failures else ""
-        print(f"{s.name:<{width}}  {s.state:<7}  {s.step:>9,}/{s.steps:,}{failures}{error}")
+        speed = (
+            f"  {s.steps_per_s:,.0f} steps/s, ~{s.hours_left:.1f} h left"
+            if s.hours_left is not None
+            else ""
+        )
+        print(f"{s.name:<{width}}  {s.state:<7}  {s.step:>9,}/{s.steps:,}{speed}{failures}{error}")
     counts = summary(statuses)
     share = counts["steps_done"] / max(1, counts["steps_total"])
     bar = "#" * round(30 * share)

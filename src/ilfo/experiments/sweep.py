@@ -422,6 +422,15 @@ class RunStatus:
     """How many of its attempts ended with an error (not counting interruptions)."""
     error: str | None = None
     """The last failure's message."""
+    steps_per_s: float | None = None
+    """A running run's recent speed (its last episodes, evaluations included); None else."""
+
+    @property
+    def hours_left(self) -> float | None:
+        """A running run's remaining steps at its recent speed, in hours; None else."""
+        if not self.steps_per_s:
+            return None
+        return (self.steps - self.step) / self.steps_per_s / 3600
 
 
 def run_status(sweep: Sweep, run: SweepRun) -> RunStatus:
@@ -445,7 +454,8 @@ def run_status(sweep: Sweep, run: SweepRun) -> RunStatus:
         state = "failed"
     else:
         state = "pending"
-    return RunStatus(run.name, state, min(step, run.steps), run.steps, len(failed), error)
+    rate = _metrics_rate(run_dir) if state == "running" else None
+    return RunStatus(run.name, state, min(step, run.steps), run.steps, len(failed), error, rate)
 
 
 def _locked(run_dir: Path) -> bool:
@@ -475,6 +485,32 @@ def _metrics_step(run_dir: Path) -> int:
         if head.isdigit():
             return int(head)
     return 0
+
+
+def _metrics_rate(run_dir: Path, tail_bytes: int = 16384) -> float | None:
+    """Steps per second of wall time over metrics.csv's last rows (about 16 KB of them: the
+    last hundred-odd episodes), evaluations included; None without two rows to compare."""
+    path = run_dir / "metrics.csv"
+    if not path.is_file():
+        return None
+    with path.open("rb") as f:
+        header = f.readline().decode("utf-8", "replace").strip().split(",")
+        f.seek(0, 2)
+        f.seek(max(0, f.tell() - tail_bytes))
+        lines = f.read().decode("utf-8", "replace").splitlines()[1:]  # the first may be cut
+    if "step" not in header or "wall_time" not in header:
+        return None
+    step_at, wall_at = header.index("step"), header.index("wall_time")
+    points = []
+    for line in lines:
+        cells = line.split(",")
+        try:
+            points.append((int(cells[step_at]), float(cells[wall_at])))
+        except (IndexError, ValueError):
+            continue  # the header, a row being written
+    if len(points) < 2 or points[-1][1] <= points[0][1]:
+        return None
+    return (points[-1][0] - points[0][0]) / (points[-1][1] - points[0][1])
 
 
 def read_attempts(sweep: Sweep, name: str) -> list[dict[str, Any]]:
