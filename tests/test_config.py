@@ -229,7 +229,7 @@ def test_config_from_settings_file_and_flags(tmp_path):
         config_from_args(str(tmp_path / "run"), {}, {})
 
 
-def test_a_run_configs_contact_forces_follow_its_env_and_algo_under_other_flags(tmp_path):
+def test_a_run_configs_resolved_settings_follow_its_env_and_algo_under_other_flags(tmp_path):
     """config.json records what its env and algo observed; --config FILE with another env or
     algo takes the new pair's default, unless a flag (or a hand-written file) says."""
     from ilfo.cli.train import config_from_args, settings_from_args
@@ -252,3 +252,15 @@ def test_a_run_configs_contact_forces_follow_its_env_and_algo_under_other_flags(
     subset = tmp_path / "subset.json"
     subset.write_text(json.dumps({"contact_forces": True}))
     assert config_from_args(str(subset), {"env": "Ant-v5"}, {}).observes_contact_forces
+    # Episodes and random steps are recorded resolved too: another algo takes its own.
+    oops = tmp_path / "oops.json"
+    resolved = TrainConfig(preset="fast").resolved(1000)  # without parts other algos refuse
+    oops.write_text(json.dumps(dataclasses.asdict(dataclasses.replace(resolved, td3=None))))
+    assert resolved.fixed_horizon is True and resolved.start_steps == 10_000
+    settings = json.loads(oops.read_text())
+    oops.write_text(json.dumps({**settings, "oops": None}))
+    firl = config_from_args(str(oops), {"algo": "firl-fkl"}, {})
+    assert not firl.uses_fixed_horizon and firl.random_steps == 1000  # f-IRL's authors'
+    assert config_from_args(str(oops), {"seed": 1}, {}).fixed_horizon is True  # a repeat keeps
+    kept = config_from_args(str(oops), {"algo": "sil", "fixed_horizon": True}, {})
+    assert kept.uses_fixed_horizon  # unless a flag says

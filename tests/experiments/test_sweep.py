@@ -201,7 +201,13 @@ def test_run_states_read_off_the_disk(tmp_path):
     assert states[d].state == "pending"
     assert states[b].steps_per_s is None  # running, but no episodes yet to time
     # A running run's speed over its recent rows (wall time in seconds), and its time left.
-    rows = ["step,episode,wall_time,eval_score", "100,1,10.0,", "200,2,12.0,0.5", "300,3,"]
+    rows = [
+        "step,episode,wall_time,critic_loss,eval_score",
+        "50,1,1.0,,",  # the random steps: no updates, far faster, not counted
+        "100,2,10.0,0.3,",
+        "200,3,12.0,0.2,0.5",
+        "300,4,",
+    ]
     (sweep.run_dir(b) / "metrics.csv").write_text("\n".join(rows))  # the last row half written
     running = run_status(sweep, sweep.run(b))
     assert running.steps_per_s == pytest.approx(50.0)

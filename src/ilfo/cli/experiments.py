@@ -234,7 +234,7 @@ def _run_sweep_status(args: argparse.Namespace) -> int:
     statuses = sweep.statuses()
     if args.json:
         for status in statuses:
-            print(json.dumps(status.__dict__))
+            print(json.dumps({**status.__dict__, "hours_left": status.hours_left}))
         return 0
     width = max(len(s.name) for s in statuses)
     for s in statuses:

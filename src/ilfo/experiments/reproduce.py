@@ -20,6 +20,7 @@ experiment once their algo name is in ``ilfo.algos``.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -142,11 +143,8 @@ class Plan:
         for spec in self.sweeps.values():
             for run in expand(spec):
                 rate = STEPS_PER_CORE_SECOND.get(run.config["algo"], 100.0)
-                if run.config.get("preset") == "paper" and run.config["algo"] in (
-                    "oops-td3",
-                    "oops-ddpg",
-                    "pwil-td3",
-                    "oops-adv-td3",
+                if run.config.get("preset") == "paper" and _preset_changes_agent(
+                    run.config["algo"]
                 ):
                     rate /= 3
                 seconds += run.steps / rate * _updates_cost(run.config)
@@ -185,6 +183,19 @@ def _updates_cost(config: dict[str, Any]) -> float:
         return 1.0
     share = UPDATE_SHARE[config.get("preset", "paper")]
     return (1 - share) + share * updates
+
+
+@functools.cache
+def _preset_changes_agent(algo: str) -> bool:
+    """Whether ``--preset`` changes the algo's agent (TD3 and DDPG's critics; not SAC, OPOLO or
+    the baselines' authors' settings), so that the paper preset runs slower than the rates."""
+    from ilfo.algos import ALGOS
+    from ilfo.training import TrainConfig
+
+    if algo not in ALGOS:
+        return False
+    paper, fast = TrainConfig(algo=algo), TrainConfig(algo=algo, preset="fast")
+    return paper.agent_config(1000) != fast.agent_config(1000)
 
 
 def _on_policy(algo: str) -> bool:

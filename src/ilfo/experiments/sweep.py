@@ -489,7 +489,9 @@ def _metrics_step(run_dir: Path) -> int:
 
 def _metrics_rate(run_dir: Path, tail_bytes: int = 16384) -> float | None:
     """Steps per second of wall time over metrics.csv's last rows (about 16 KB of them: the
-    last hundred-odd episodes), evaluations included; None without two rows to compare."""
+    last hundred-odd episodes), evaluations included, counting only rows where the agent
+    learnt (a ``critic_loss``: not the random steps or a snapshot's refill, several times
+    faster); None without two such rows to compare."""
     path = run_dir / "metrics.csv"
     if not path.is_file():
         return None
@@ -501,10 +503,13 @@ def _metrics_rate(run_dir: Path, tail_bytes: int = 16384) -> float | None:
     if "step" not in header or "wall_time" not in header:
         return None
     step_at, wall_at = header.index("step"), header.index("wall_time")
+    learnt_at = header.index("critic_loss") if "critic_loss" in header else None
     points = []
     for line in lines:
         cells = line.split(",")
         try:
+            if learnt_at is not None and not cells[learnt_at].strip():
+                continue
             points.append((int(cells[step_at]), float(cells[wall_at])))
         except (IndexError, ValueError):
             continue  # the header, a row being written

@@ -287,14 +287,19 @@ def default_contact_forces(env: str, imitation: bool) -> bool:
     return env not in CONTACT_FORCE_DIMS or not imitation
 
 
+RESOLVED_BY_ENV_AND_ALGO = ("contact_forces", "fixed_horizon", "start_steps")
+"""Settings that config.json records as its env and algo resolved them (``resolved``)."""
+
+
 def settings_for_new_runs(settings: Mapping[str, Any], drop: tuple[str, ...]) -> dict[str, Any]:
     """A settings file's (or a finished run's config.json's) settings as the base of other
     runs: without the keys in ``drop`` (what the new runs set themselves: a sweep's axes, the
     output directory) and without parts that are None (config.json lists every part). A run's
-    config.json records the contact forces its env and algo observed, so dropping ``env`` or
-    ``algo`` drops that choice too (the new pair's default applies)."""
+    config.json records the contact forces, episodes and random steps as its env and algo
+    resolved them, so dropping ``env`` or ``algo`` drops those too (the new pair's defaults
+    apply)."""
     if any(key in settings and key in drop for key in ("env", "algo")):
-        drop = (*drop, "contact_forces")
+        drop = (*drop, *RESOLVED_BY_ENV_AND_ALGO)
     return {
         key: value
         for key, value in settings.items()
