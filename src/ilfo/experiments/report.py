@@ -164,7 +164,7 @@ def _training_settings(config: dict[str, Any], source: Path) -> tuple[str, ...]:
     env and algo: the preset, steps, updates per step, episodes, and its agent's fields. A
     config this version cannot read raises (the report leaves the run out and says why)."""
     from ilfo.algos import AGENT_PARTS
-    from ilfo.training.config import TrainConfig, config_from_dict
+    from ilfo.training.config import TrainConfig, config_from_dict, preset_changes_agent
 
     run = config_from_dict(config, source)
     default = TrainConfig(env=run.env, algo=run.algo, seed=run.seed)
@@ -176,9 +176,7 @@ def _training_settings(config: dict[str, Any], source: Path) -> tuple[str, ...]:
     horizon = run.horizon or 1000
     alike = dataclasses.replace(default, preset=run.preset, fixed_horizon=run.uses_fixed_horizon)
     labels = []
-    if alike.agent_config(horizon) != dataclasses.replace(
-        alike, preset=default.preset
-    ).agent_config(horizon):
+    if run.preset != default.preset and preset_changes_agent(alike, horizon):
         labels.append(f"{run.preset} preset")
     if run.steps != default.steps:
         labels.append(f"{_steps_label(run.steps)} steps")
@@ -444,15 +442,6 @@ def build_report(
                 f"{cell_name}: seeds {seeds} repeat (the same runs found twice?); each counts",
                 stacklevel=2,
             )
-        mixed = {label for run in members for label in run.settings} - set.intersection(
-            *(set(run.settings) for run in members)
-        )
-        if mixed:
-            warnings.warn(
-                f"{cell_name}: its runs were trained with different settings "
-                f"({', '.join(sorted(mixed))}); they are averaged as seeds of one cell",
-                stacklevel=2,
-            )
         scores = np.array([r.final_score for r in members])
         interval = stats.stratified_bootstrap(scores, stats.iqm, resamples=resamples, seed=seed)
         paper = (
@@ -460,7 +449,15 @@ def build_report(
             if variant is None
             else (paper_ablation(env, variant) if algo == "oops-td3" else None)
         )
-        cells.append(Cell(env, algo, num_demos, variant, tuple(members), interval, paper))
+        cell = Cell(env, algo, num_demos, variant, tuple(members), interval, paper)
+        if cell.mixed_settings:
+            warnings.warn(
+                f"{cell_name}: its runs were trained with different settings "
+                f"({', '.join(sorted(cell.mixed_settings))}); they are averaged as seeds of one "
+                "cell",
+                stacklevel=2,
+            )
+        cells.append(cell)
     order = {env: k for k, env in enumerate(dict.fromkeys(r.env for r in runs))}
     cells.sort(key=lambda c: (order[c.env], c.num_demos, c.algo, c.variant or ""))
     return Report(tuple(cells), tuple(skipped), resamples)

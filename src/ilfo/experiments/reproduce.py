@@ -190,12 +190,9 @@ def _preset_changes_agent(algo: str) -> bool:
     """Whether ``--preset`` changes the algo's agent (TD3 and DDPG's critics; not SAC, OPOLO or
     the baselines' authors' settings), so that the paper preset runs slower than the rates."""
     from ilfo.algos import ALGOS
-    from ilfo.training import TrainConfig
+    from ilfo.training.config import TrainConfig, preset_changes_agent
 
-    if algo not in ALGOS:
-        return False
-    paper, fast = TrainConfig(algo=algo), TrainConfig(algo=algo, preset="fast")
-    return paper.agent_config(1000) != fast.agent_config(1000)
+    return algo in ALGOS and preset_changes_agent(TrainConfig(algo=algo))
 
 
 def _on_policy(algo: str) -> bool:

@@ -287,6 +287,15 @@ def default_contact_forces(env: str, imitation: bool) -> bool:
     return env not in CONTACT_FORCE_DIMS or not imitation
 
 
+def preset_changes_agent(config: TrainConfig, horizon: int = 1000) -> bool:
+    """Whether the other ``preset`` would build ``config``'s agent otherwise (TD3 and DDPG's
+    network sizes; not SAC, OPOLO, or the baselines' authors' settings)."""
+    other = "fast" if config.preset == "paper" else "paper"
+    return config.agent_config(horizon) != dataclasses.replace(config, preset=other).agent_config(
+        horizon
+    )
+
+
 RESOLVED_BY_ENV_AND_ALGO = ("contact_forces", "fixed_horizon", "start_steps")
 """Settings that config.json records as its env and algo resolved them (``resolved``)."""
 
