@@ -109,6 +109,12 @@ def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     assert "--healthy-angle-range cannot change on --resume" in capsys.readouterr().err
     assert main([*base, "--resume", "--gamma", "0.99"]) == 2
     assert "--gamma cannot change on --resume" in capsys.readouterr().err
+    assert main([*base, "--resume", "--no-contact-forces"]) == 2
+    assert "--contact-forces cannot change on --resume" in capsys.readouterr().err
+    assert main([*base[:-2], str(tmp_path / "cf"), "--no-progress", "--no-contact-forces"]) == 2
+    assert "--no-contact-forces applies to Ant-v5, Humanoid-v5, not Hopper-v5" in (
+        capsys.readouterr().err
+    )
     walker = ["expert", "train", "Walker2d-v5", "--run-dir", str(run), "--no-progress"]
     assert main([*walker, "--resume"]) == 2
     assert "trains an expert for Hopper-v5, not Walker2d-v5" in capsys.readouterr().err
@@ -140,6 +146,7 @@ def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     assert card["num_demos"] == 1 and card["demo_seeds"] == [0]
     assert card["note"] == "falls: the best reached" and card["demo_seeds_with_a_fall"] == [0]
     assert card["trained_healthy_angle_range"] == [-0.15, 0.15]
+    assert card["observes_contact_forces"] is None  # Hopper has none
     capsys.readouterr()
     assert main(["expert", "eval", str(out), "--episodes", "1", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["episodes"] == 1
@@ -220,6 +227,48 @@ def test_a_finish_is_kept_at_full_length_and_scored_as_the_evaluation(
     # --keep-falls keeps a fall
     kept = collect_demos(expert, 2, tmp_path / "k.npz", first_seed=1, skip_falls=False)
     assert [e.task_score for e in kept] == [40.0, 40.0]
+
+
+def test_an_expert_without_contact_forces_records_demos_of_the_full_observation(tmp_path):
+    # Ant's expert may learn without the contact forces (as on the paper's v2 Ant, where they
+    # were all zero); its demos must still hold all 105 columns, and its actions must be those
+    # of the policy on the 27 it observes.
+    from ilfo.envs import make_env
+    from ilfo.experiments.calibration import calibrate
+    from ilfo.training import rollout_policy
+
+    config = dataclasses.replace(
+        TINY_SAC, env="Ant-v5", contact_forces=False, steps=250, horizon=30, eval_every=250
+    )
+    run = tmp_path / "run"
+    Trainer(config, run, progress=False).train()
+    expert = load_expert(export_expert(run, tmp_path / "Ant-v5"))
+    assert not expert.sees_all_columns
+    out = tmp_path / "Ant-v5"
+    (episode,) = collect_demos(expert, 1, out / DEMOS_FILE, first_seed=3, skip_falls=False)
+    assert episode.observations.shape == (31, 105)
+    narrow = rollout_policy(
+        make_env("Ant-v5", True, horizon=30, contact_forces=False),
+        expert.agent,
+        expert.policy,
+        30,
+        seed=3,
+    )
+    np.testing.assert_array_equal(episode.observations[:, :27], narrow.observations)
+    np.testing.assert_allclose(episode.actions, narrow.actions, rtol=1e-5, atol=1e-6)
+    assert np.abs(episode.observations[:, 27:]).max() > 0  # the contact forces, recorded
+    assert write_card(out)["observes_contact_forces"] is False
+    np.testing.assert_array_equal(expert.observe(episode.observations), narrow.observations)
+    for contact_forces in (None, True):  # the reward with or without them; the expert acts
+        points = calibrate(
+            "Ant-v5",
+            (0.0,),
+            episodes=1,
+            expert_directory=out,
+            horizon=20,
+            contact_forces=contact_forces,
+        )
+        assert len(points) == 3 and all(np.isfinite(p.ot_distance) for p in points)
 
 
 def test_missing_expert_is_a_clear_error(tmp_path, capsys):

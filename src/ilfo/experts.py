@@ -24,7 +24,7 @@ import numpy as np
 
 from ilfo import demos as demo_io
 from ilfo.agents import Policy, policy_of
-from ilfo.envs import make_env, termination_is_finish
+from ilfo.envs import CONTACT_FORCE_DIMS, drop_contact_forces, make_env, termination_is_finish
 from ilfo.experiments.paper import paper_expert_returns
 from ilfo.files import file_sha256, load_msgpack
 from ilfo.paths import DATA_DIR
@@ -90,15 +90,31 @@ class ExpertPolicy:
     policy: Policy
     horizon: int
 
+    @property
+    def sees_all_columns(self) -> bool:
+        """Whether the policy observes all of its env's observation columns (not: an Ant-v5 or
+        Humanoid-v5 expert trained without the contact forces)."""
+        return self.config.env not in CONTACT_FORCE_DIMS or self.config.observes_contact_forces
+
+    def observe(self, observations: np.ndarray) -> np.ndarray:
+        """What the policy sees of the env's full observations (..., d): all of them, or those
+        without the contact forces."""
+        if self.sees_all_columns:
+            return observations
+        return drop_contact_forces(observations, self.config.env)
+
     def rollout(self, seed: int) -> Any:
-        """One deterministic fixed-horizon episode (a ``train.Rollout``)."""
-        env = make_env(
-            self.config.env,
-            True,
-            horizon=self.horizon,
-            contact_forces=self.config.observes_contact_forces,
-        )
-        return rollout_policy(env, self.agent, self.policy, self.horizon, seed=seed)
+        """One deterministic fixed-horizon episode (a ``train.Rollout``) in the env with all its
+        observation columns, whatever the policy sees of them: demos keep the full state, and
+        a run can imitate it with or without the contact forces."""
+        env = make_env(self.config.env, True, horizon=self.horizon)
+        observe = None if self.sees_all_columns else self.observe
+        try:
+            return rollout_policy(
+                env, self.agent, self.policy, self.horizon, seed=seed, observe=observe
+            )
+        finally:
+            env.close()
 
 
 def export_expert(
@@ -261,7 +277,7 @@ def collect_demos(
             if fell:
                 kept_falls.append(seed)
             actions = policy_actions(
-                expert.agent, expert.policy, rollout.observations, expert.horizon
+                expert.agent, expert.policy, expert.observe(rollout.observations), expert.horizon
             )
             episodes.append(
                 demo_io.Episode(
@@ -323,6 +339,12 @@ def write_card(
         # A stricter torso angle range than the env's during training (ilfo expert train
         # --healthy-angle-range); demos and evaluations use the env's own range.
         "trained_healthy_angle_range": cfg.get("healthy_angle_range"),
+        # Ant-v5, Humanoid-v5: False for an expert that acts without the contact forces (ilfo
+        # expert train --no-contact-forces); its demos still hold the full observation. None
+        # on envs without them. A record without the setting predates it: it observed them.
+        "observes_contact_forces": cfg.get("contact_forces") is not False
+        if cfg["env"] in CONTACT_FORCE_DIMS
+        else None,
         "date": time.strftime("%Y-%m-%d"),
         "num_demos": len(data.episodes),
         "demo_lengths": [int(len(e.observations) - 1) for e in data.episodes],

@@ -66,6 +66,15 @@ def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
         "learns to keep a margin from a fall; demos are still recorded in the standard env "
         "(default: the env's own range; a resumed run keeps its own)",
     )
+    t.add_argument(
+        "--contact-forces",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="Ant-v5, Humanoid-v5: whether the expert observes the contact forces that end their "
+        "observations (default: it does). Without them SAC learns from the 27 (Ant) or 270 "
+        "(Humanoid) other columns, as on the paper's v2 tasks, whose contact forces were all "
+        "zero; its demos still record the full observation (a resumed run keeps its own)",
+    )
     t.add_argument("--resume", action="store_true", help="continue the existing run")
     t.add_argument("--run-dir", default=None, help="run directory (default: see above)")
     t.add_argument(
@@ -121,6 +130,8 @@ def _run_expert_train(args: argparse.Namespace) -> int:
             )
         if args.gamma is not None:
             raise ValueError("--gamma cannot change on --resume: the run keeps its own")
+        if args.contact_forces is not None:
+            raise ValueError("--contact-forces cannot change on --resume: the run keeps its own")
         recorded = read_run_config(run_dir).get("env")
         if recorded != args.env:
             raise ValueError(f"{run_dir} trains an expert for {recorded}, not {args.env}")
@@ -140,6 +151,7 @@ def _run_expert_train(args: argparse.Namespace) -> int:
             sac=sac,
             best_by="return",
             healthy_angle_range=args.healthy_angle_range,  # a list: TrainConfig makes it a tuple
+            contact_forces=args.contact_forces,
             seed=args.seed,
             steps=1_000_000 if args.steps is None else args.steps,
             eval_every=args.eval_every,

@@ -47,9 +47,9 @@ def calibrate(
 ) -> list[CalibrationPoint]:
     """Every (policy, episode) of the calibration of ``env_id``'s expert (see the module);
     ``horizon`` shortens the episodes (None: the expert's). ``contact_forces`` (Ant-v5,
-    Humanoid-v5): whether OOPS rewards the states with their contact forces (the expert still
-    acts on all of them); None: as ``ilfo train`` imitates (``default_contact_forces``:
-    without them)."""
+    Humanoid-v5): whether OOPS rewards the states with their contact forces (the expert acts
+    on what it observes of them, ``ExpertPolicy.observe``); None: as ``ilfo train`` imitates
+    (``default_contact_forces``: without them)."""
     from ilfo import demos
     from ilfo.envs import drop_contact_forces, episode_scores, make_env
     from ilfo.experts import expert_dir, load_expert
@@ -64,22 +64,16 @@ def calibrate(
         raise ValueError(f"episodes must be >= 1, got {episodes}")
     demo = demos.load(directory / "demos.npz").episodes[0].observations
 
-    # An expert trained without contact forces observes none: nothing to drop.
+    # The env and the demos have every column; the expert acts on what it observes of them.
     if contact_forces is None:
         contact_forces = default_contact_forces(env_id, imitation=True)
-    drop = not contact_forces and expert.config.observes_contact_forces
 
     def reward_view(observations: np.ndarray) -> np.ndarray:
-        return drop_contact_forces(observations, env_id) if drop else observations
+        return observations if contact_forces else drop_contact_forces(observations, env_id)
 
     rewarder = OOPS([reward_view(demo)], oops or OOPSConfig())
     steps = horizon or expert.horizon
-    env = make_env(
-        env_id,
-        fixed_horizon=True,
-        horizon=steps,
-        contact_forces=expert.config.observes_contact_forces,
-    )
+    env = make_env(env_id, fixed_horizon=True, horizon=steps)
     low, high = env.action_space.low, env.action_space.high
     act_expert = expert.agent.functions.act
 
@@ -88,9 +82,9 @@ def calibrate(
             return np.zeros_like(low)
         if kind == "random":
             return rng.uniform(low, high)
-        agent_obs = obs
+        agent_obs = expert.observe(obs)
         if expert.agent.time_feature:  # the expert's own clock: its horizon, not ``steps``
-            agent_obs = np.append(obs, (expert.horizon - t) / expert.horizon)
+            agent_obs = np.append(agent_obs, (expert.horizon - t) / expert.horizon)
         action = np.asarray(act_expert(expert.policy, agent_obs.astype(np.float32)))
         return np.clip(action + rng.normal(0.0, float(kind), action.shape), low, high)
 

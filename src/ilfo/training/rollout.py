@@ -9,6 +9,7 @@ observations to other people's RL code.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -69,10 +70,13 @@ def rollout_policy(
     seed: int,
     render: bool = False,
     key: Any = None,
+    observe: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> Rollout:
     """A fixed-horizon episode of the agent's policy (``state``: an agent state or a
     ``Policy``): deterministic, or with the policy's exploration where ``key`` (a JAX key) is
-    given (step t's key: ``jax.random.fold_in(key, t)``)."""
+    given (step t's key: ``jax.random.fold_in(key, t)``). ``observe``: what the policy sees of
+    each of ``env``'s observations, where it sees less than the rollout records (an expert
+    without the contact forces, acting in the full env: ``ExpertPolicy.observe``)."""
     import jax
 
     policy = policy_of(state)
@@ -81,7 +85,8 @@ def rollout_policy(
     frames = []
     step_keys = None if key is None else np.asarray(jax.random.split(key, horizon))
     for t in range(horizon):
-        agent_obs = agent_observation(obs, t, horizon, agent.time_feature)
+        seen = obs if observe is None else observe(obs)
+        agent_obs = agent_observation(seen, t, horizon, agent.time_feature)
         if step_keys is None:
             action = np.asarray(agent.functions.act(policy, agent_obs))
         else:
