@@ -93,8 +93,9 @@ class ExpertPolicy:
     @property
     def sees_all_columns(self) -> bool:
         """Whether the policy observes all of its env's observation columns (not: an Ant-v5 or
-        Humanoid-v5 expert trained without the contact forces)."""
-        return self.config.env not in CONTACT_FORCE_DIMS or self.config.observes_contact_forces
+        Humanoid-v5 expert trained without the contact forces; envs without them resolve to
+        True)."""
+        return self.config.observes_contact_forces
 
     def observe(self, observations: np.ndarray) -> np.ndarray:
         """What the policy sees of the env's full observations (..., d): all of them, or those
