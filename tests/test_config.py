@@ -131,6 +131,30 @@ def test_resolved_config_builds_the_same_agent_and_rewarder():
     assert TrainConfig(algo="firl-fkl").resolved(100).fixed_horizon is False
 
 
+def test_pwil_trains_on_standard_episodes_and_its_older_runs_on_the_fixed_horizon(tmp_path):
+    from ilfo.training import config_from_dict, read_run_config
+
+    pwil = TrainConfig(algo="pwil-td3")
+    assert not pwil.uses_fixed_horizon and pwil.resolved(1000).fixed_horizon is False
+    assert not pwil.agent_config(1000).time_augmentation  # no time feature without a horizon
+    assert TrainConfig(algo="pwil-td3", fixed_horizon=True).uses_fixed_horizon  # as asked
+    # A config.json from before records held the resolved episodes says None: a PWIL-(s) run
+    # then trained on the fixed horizon, and resumes and reports so. A sweep's manifest, read
+    # with config_from_dict alone, keeps None: its runs take the algo's default.
+    for algo, as_run in (("pwil-td3", True), ("oops-td3", None), ("firl-fkl", None)):
+        record = {**dataclasses.asdict(TrainConfig(algo=algo)), "fixed_horizon": None}
+        run = tmp_path / algo
+        run.mkdir()
+        (run / "config.json").write_text(json.dumps(record))
+        assert read_run_config(run)["fixed_horizon"] is as_run
+        assert config_from_dict(record, "manifest").fixed_horizon is None
+    old_pwil = config_from_dict(read_run_config(tmp_path / "pwil-td3"), "config.json")
+    assert old_pwil.uses_fixed_horizon and old_pwil.agent_config(1000).time_augmentation
+    recorded = {**dataclasses.asdict(pwil.resolved(1000))}
+    (tmp_path / "pwil-td3" / "config.json").write_text(json.dumps(recorded))
+    assert read_run_config(tmp_path / "pwil-td3")["fixed_horizon"] is False  # as recorded
+
+
 def test_default_agent_and_rewarder_configs_are_the_presets():
     # Fixed-horizon imitation: the preset with time augmentation on, max_time the horizon.
     paper = TrainConfig().agent_config(1000)

@@ -210,7 +210,21 @@ def read_run_config(run_dir: str | Path) -> dict[str, Any]:
     path = Path(run_dir) / CONFIG_FILE
     if not path.is_file():
         raise FileNotFoundError(f"{run_dir} is not a run directory (no {CONFIG_FILE})")
-    return _read_json_object(path)
+    return _with_episodes_as_run(_read_json_object(path))
+
+
+def _with_episodes_as_run(config: dict[str, Any]) -> dict[str, Any]:
+    """``config`` with the episodes its run trained on where it predates config.json recording
+    them resolved and its algo's default has changed since (``Recipe.fixed_horizon_when_
+    unrecorded``): an old PWIL-(s) run resumes and reports on the fixed horizon it ran."""
+    from ilfo.algos import ALGOS
+
+    recipe = ALGOS.get(str(config.get("algo")))
+    if config.get("fixed_horizon") is not None or recipe is None:
+        return config
+    if recipe.fixed_horizon_when_unrecorded is None:
+        return config
+    return {**config, "fixed_horizon": recipe.fixed_horizon_when_unrecorded}
 
 
 def read_demos_record(run_dir: str | Path) -> dict[str, Any] | None:
