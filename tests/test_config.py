@@ -150,7 +150,7 @@ def test_pwil_trains_on_standard_episodes_and_its_older_runs_on_the_fixed_horizo
         assert config_from_dict(record, "manifest").fixed_horizon is None
     old_pwil = config_from_dict(read_run_config(tmp_path / "pwil-td3"), "config.json")
     assert old_pwil.uses_fixed_horizon and old_pwil.agent_config(1000).time_augmentation
-    recorded = {**dataclasses.asdict(pwil.resolved(1000))}
+    recorded = dataclasses.asdict(pwil.resolved(1000))
     (tmp_path / "pwil-td3" / "config.json").write_text(json.dumps(recorded))
     assert read_run_config(tmp_path / "pwil-td3")["fixed_horizon"] is False  # as recorded
 

@@ -215,8 +215,9 @@ def read_run_config(run_dir: str | Path) -> dict[str, Any]:
 
 def _with_episodes_as_run(config: dict[str, Any]) -> dict[str, Any]:
     """``config`` with the episodes its run trained on where it predates config.json recording
-    them resolved and its algo's default has changed since (``Recipe.fixed_horizon_when_
-    unrecorded``): an old PWIL-(s) run resumes and reports on the fixed horizon it ran."""
+    them resolved and its algo's default has changed since
+    (``Recipe.fixed_horizon_when_unrecorded``): an old PWIL-(s) run resumes and reports on the
+    fixed horizon it ran."""
     from ilfo.algos import ALGOS
 
     recipe = ALGOS.get(str(config.get("algo")))
