@@ -132,6 +132,34 @@ def test_a_run_that_imitated_an_expert_replaced_since_is_not_set_beside_the_pape
     assert before.cell("Hopper-v5", "oops-td3", 1).versus_paper == "other demos"
 
 
+def test_a_cell_whose_shipped_expert_is_weaker_than_the_papers_says_so(tmp_path):
+    """A weak expert's demos are easier to match, so its cell's verdict carries the expert's
+    strength (from its card); a cell of an expert at the paper's level, or of other demos,
+    does not."""
+    from ilfo.experiments.report import STRONG_EXPERT, shipped_expert_fraction
+
+    duck = shipped_expert_fraction("MinitaurBulletDuckEnv-v0")
+    assert duck is not None and duck < STRONG_EXPERT  # the shipped Duck expert: 51%
+    assert shipped_expert_fraction("Hopper-v5") >= STRONG_EXPERT
+    for env, demos in (("MinitaurBulletDuckEnv-v0", None), ("Hopper-v5", None),
+                       ("Walker2d-v5", "mine/demos.npz")):  # fmt: skip
+        _fake_run(tmp_path / "runs", env, env=env, algo="oops-td3", seed=0,
+                  scores=[0.5, 0.97], demos=demos)  # fmt: skip
+    report = build_report(collect_runs([tmp_path / "runs"])[0], resamples=100)
+    assert report.cell("MinitaurBulletDuckEnv-v0", "oops-td3", 1).expert_fraction == duck
+    assert report.cell("Walker2d-v5", "oops-td3", 1).expert_fraction is None
+    write_report(report, tmp_path / "report")
+    table = (tmp_path / "report" / "report.md").read_text()
+    rows = {line.split(" | ")[0].strip("| "): line for line in table.splitlines()}
+    assert f"within (expert at {duck:.0%} of the paper's)" in rows["MinitaurBulletDuckEnv-v0"]
+    assert "expert at" not in rows["Hopper-v5"] and "| within |" in rows["Hopper-v5"]
+    assert "| other demos |" in rows["Walker2d-v5"]
+    with (tmp_path / "report" / "cells.csv").open() as f:
+        fractions = {r["env"]: r["expert_fraction_of_paper"] for r in csv.DictReader(f)}
+    assert float(fractions["MinitaurBulletDuckEnv-v0"]) == duck
+    assert fractions["Walker2d-v5"] == ""
+
+
 def test_runs_that_observed_other_than_the_default_contact_forces_are_a_cell_of_their_own(
     tmp_path,
 ):

@@ -17,6 +17,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import functools
+import json
 import math
 import warnings
 from collections.abc import Iterable, Sequence
@@ -273,6 +274,23 @@ def _shipped_demos_sha256(env: str) -> str | None:
     return file_sha256(path) if path.is_file() else None
 
 
+STRONG_EXPERT = 0.9
+"""The fraction of the paper's expert return from which a shipped expert counts as the
+paper's equal (issue 25's bar); below it, the report says so beside the cell's verdict."""
+
+
+@functools.cache
+def shipped_expert_fraction(env: str) -> float | None:
+    """The shipped expert's demo return over the paper's expert's (``card.json``), or None."""
+    from ilfo.training.build import default_demos_path
+
+    card = default_demos_path(env).parent / "card.json"
+    if not card.is_file():
+        return None
+    fraction = json.loads(card.read_text()).get("fraction_of_paper_expert")
+    return None if fraction is None else float(fraction)
+
+
 def imitates_shipped_demos(demos: str | None, env: str) -> bool:
     """Whether a run's ``demos`` setting is the env's shipped expert demos: None (the default)
     or a path to them as this repository lays them out (``.../data/experts/<env>/demos.npz``,
@@ -347,6 +365,16 @@ class Cell:
             for label, seeds in self.mixed_settings.items()
         ]
         return "; ".join(parts)
+
+    @property
+    def expert_fraction(self) -> float | None:
+        """How good the expert behind its demos is: the shipped expert's return as a fraction
+        of the paper's expert's (its card's ``fraction_of_paper_expert``); None where its runs
+        imitated other demos or the card does not say. Below ``STRONG_EXPERT``, its demos
+        are easier to match than the paper's and normalised scores flatter ilfo."""
+        if not all(r.shipped_demos for r in self.runs):
+            return None
+        return shipped_expert_fraction(self.env)
 
     @property
     def versus_paper(self) -> str:
@@ -543,6 +571,13 @@ def improvement_rows(report: Report) -> list[dict[str, object]]:
     return rows
 
 
+def _versus_paper_text(cell: Cell) -> str:
+    fraction = cell.expert_fraction
+    if not cell.versus_paper or fraction is None or fraction >= STRONG_EXPERT:
+        return cell.versus_paper
+    return f"{cell.versus_paper} (expert at {fraction:.0%} of the paper's)"
+
+
 def cell_rows(report: Report) -> list[dict[str, object]]:
     """One row per cell: ilfo's statistics beside the paper's number."""
     rows = []
@@ -569,6 +604,7 @@ def cell_rows(report: Report) -> list[dict[str, object]]:
                 "paper_std": None if c.paper is None else c.paper.std,
                 "paper_source": "" if c.paper is None else c.paper.where,
                 "versus_paper": c.versus_paper,
+                "expert_fraction_of_paper": c.expert_fraction,
                 "seeds_list": " ".join(str(r.seed) for r in c.runs),
                 "settings": c.settings_text,
             }
@@ -607,7 +643,9 @@ def write_report(report: Report, out: str | Path, *, sources: Sequence[str] = ()
         "fixed-horizon score normalised by the demos' mean return (the paper's); mean +- std "
         f"over seeds (population std); IQM with a 95% stratified-bootstrap interval "
         f"({report.resamples} resamples, percentile). `vs paper`: within, above or below the "
-        "paper's mean +- 2 std (Tables 1-2). `settings`: where the runs were trained otherwise "
+        "paper's mean +- 2 std (Tables 1-2), with the expert's strength where its demos "
+        f"return less than {STRONG_EXPERT:.0%} of the paper's expert (easier demos to match: "
+        "the scores flatter ilfo). `settings`: where the runs were trained otherwise "
         "than `ilfo train`'s defaults (the paper's protocol).",
         "",
         "## Final performance",
@@ -621,7 +659,7 @@ def write_report(report: Report, out: str | Path, *, sources: Sequence[str] = ()
         lines.append(
             f"| {c.env} | {c.algo} | {c.num_demos} | {c.variant or ''} | {_seeds_text(c)} | "
             f"{_fmt(c.mean)} ± {_fmt(c.std)} | {c.iqm} | {_fmt(row['return_norm_mean'])} | "
-            f"{paper} | {c.versus_paper} | {c.settings_text} |"
+            f"{paper} | {_versus_paper_text(c)} | {c.settings_text} |"
         )
     variants = [
         (c, report.percent_difference(c))
