@@ -155,6 +155,27 @@ def test_pwil_trains_on_standard_episodes_and_its_older_runs_on_the_fixed_horizo
     assert read_run_config(tmp_path / "pwil-td3")["fixed_horizon"] is False  # as recorded
 
 
+def test_a_run_given_as_settings_repeats_the_episodes_it_ran(tmp_path):
+    """`--config RUN/config.json` repeats an old PWIL-(s) run on the fixed horizon it ran; the
+    same settings in a file outside a run directory are a user's settings, whose None means
+    the algo's default (standard episodes). (A sweep sets the algo, so its runs take their
+    algo's episodes whatever its `config` file says.)"""
+    from ilfo.cli.train import config_from_args
+
+    record = {**dataclasses.asdict(TrainConfig(algo="pwil-td3")), "fixed_horizon": None}
+    run, loose = tmp_path / "run", tmp_path / "mine"
+    for folder in (run, loose):
+        folder.mkdir()
+        (folder / "config.json").write_text(json.dumps(record))
+    (run / "metrics.csv").write_text("step,episode\n")
+    repeat = config_from_args(str(run / "config.json"), {}, {})
+    assert repeat.uses_fixed_horizon
+    assert not config_from_args(
+        str(run / "config.json"), {"fixed_horizon": False}, {}
+    ).uses_fixed_horizon
+    assert not config_from_args(str(loose / "config.json"), {}, {}).uses_fixed_horizon
+
+
 def test_default_agent_and_rewarder_configs_are_the_presets():
     # Fixed-horizon imitation: the preset with time augmentation on, max_time the horizon.
     paper = TrainConfig().agent_config(1000)

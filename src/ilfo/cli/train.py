@@ -84,12 +84,11 @@ def settings_from_args(
     A run's config.json records the contact forces its env and algo observed: where the flags
     change (or ``drop`` leaves out) the file's env or algo, that choice is left out too (the new
     pair's default) unless a flag sets it."""
-    from ilfo.files import read_settings_file
-    from ilfo.training import settings_for_new_runs
+    from ilfo.training import read_settings, settings_for_new_runs
 
     settings: dict[str, Any] = {}
     if config_file is not None:
-        settings = read_settings_file(config_file)
+        settings = read_settings(config_file)
         # A flag that changes the file's env or algo replaces it, as ``drop`` does.
         changed = tuple(
             k for k in ("env", "algo") if k in overrides and overrides[k] != settings.get(k)

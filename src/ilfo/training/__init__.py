@@ -61,6 +61,7 @@ from ilfo.training.run_dir import (
     latest_checkpoint,
     load_run_policy,
     read_run_config,
+    read_settings,
 )
 
 __all__ = [
@@ -102,6 +103,7 @@ __all__ = [
     "policy_actions",
     "read_metrics",
     "read_run_config",
+    "read_settings",
     "rollout_policy",
     "run_name",
     "save_checkpoint",

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ilfo.files import check_new_copy_dir, load_msgpack
+from ilfo.files import check_new_copy_dir, load_msgpack, read_settings_file
 
 if TYPE_CHECKING:  # at run time these are imported where used: they import this module
     from ilfo.agents import Policy
@@ -37,6 +37,7 @@ if TYPE_CHECKING:  # at run time these are imported where used: they import this
     from ilfo.training.config import TrainConfig
 
 CONFIG_FILE = "config.json"
+METRICS_FILE = "metrics.csv"
 DEMOS_RECORD_FILE = "demos.json"  # which demo file an imitation run imitates (its sha256)
 CHECKPOINTS_DIR = "checkpoints"
 LOCK_FILE = ".lock"
@@ -213,6 +214,18 @@ def read_run_config(run_dir: str | Path) -> dict[str, Any]:
     return _with_episodes_as_run(_read_json_object(path))
 
 
+def read_settings(path: str | Path) -> dict[str, Any]:
+    """A settings file (``files.read_settings_file``), read as the run record it is where it is
+    a run's config.json (one beside its run's metrics.csv): then, as ``read_run_config``
+    reads it, with the episodes that run trained on, so that ``--config RUN/config.json``
+    repeats the run even where its algo's default has changed since."""
+    path = Path(path)
+    settings = read_settings_file(path)
+    if path.name == CONFIG_FILE and (path.parent / METRICS_FILE).is_file():
+        return _with_episodes_as_run(settings)
+    return settings
+
+
 def _with_episodes_as_run(config: dict[str, Any]) -> dict[str, Any]:
     """``config`` with the episodes its run trained on where it predates config.json recording
     them resolved and its algo's default has changed since
@@ -322,7 +335,7 @@ def load_run_policy(run_dir: str | Path, which: str = "final") -> RunPolicy:
 SNAPSHOT_FILES = (
     CONFIG_FILE,
     DEMOS_RECORD_FILE,
-    "metrics.csv",
+    METRICS_FILE,
     FINAL_POLICY_FILE,
     BEST_POLICY_FILE,
     BEST_POLICY_INFO,
