@@ -282,9 +282,10 @@ paper's equal (issue 25's bar); below it, the report says so beside the cell's v
 @functools.cache
 def shipped_expert_fraction(env: str) -> float | None:
     """The shipped expert's demo return over the paper's expert's (``card.json``), or None."""
+    from ilfo.experts import CARD_FILE
     from ilfo.training.build import default_demos_path
 
-    card = default_demos_path(env).parent / "card.json"
+    card = default_demos_path(env).parent / CARD_FILE
     if not card.is_file():
         return None
     fraction = json.loads(card.read_text()).get("fraction_of_paper_expert")
