@@ -755,7 +755,8 @@ def _plot_curves(report: Report, out: Path) -> list[Path]:
         fig, ax = plt.subplots(figsize=(6, 4))
         for c in (c for c in report.cells if c.env == env):
             steps, mean, low, high = _curve_band(c.runs, min(report.resamples, 1000))
-            label = f"{_label(c.algo, c.num_demos, c.variant)} ({len(c.runs)} seeds)"
+            n = len(c.runs)
+            label = f"{_label(c.algo, c.num_demos, c.variant)} ({n} seed{'s' if n != 1 else ''})"
             ax.plot(steps, mean, label=label)
             ax.fill_between(steps, low, high, alpha=0.2)
         title = f"{env}: mean over seeds, 95% bootstrap band"
