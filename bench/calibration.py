@@ -26,7 +26,7 @@ import numpy as np
 # Keep this folder off the path: bench/ot.py would shadow POT's `ot`.
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 from ilfo.benchmarking import machine
-from ilfo.experiments.calibration import calibrate, spearman
+from ilfo.experiments.calibration import calibrate, pearson, spearman
 from ilfo.ot import METRICS
 from ilfo.rewards import OOPSConfig
 from ilfo.training.config import default_contact_forces
@@ -89,13 +89,12 @@ def main() -> None:
                               **stamp}))  # fmt: skip
         else:
             print(f"{name:>14} {score:11.1f} {proxy:13.1f} {distance:12.3f}")
-    rho = spearman(points)
+    rho, r = spearman(points), pearson(points)
     if args.json:
-        print(
-            json.dumps({"bench": "calibration_summary", "env": args.env, "spearman": rho, **stamp})
-        )
+        summary = {"bench": "calibration_summary", "env": args.env, "spearman": rho, "pearson": r}
+        print(json.dumps({**summary, **stamp}))
     else:
-        print(f"Spearman rank correlation, task score vs proxy return, per episode: {rho:.3f}")
+        print(f"Task score vs proxy return, per episode: Spearman {rho:.3f}, Pearson {r:.3f}")
         print(stamp["machine"], stamp["date"])
 
 

@@ -4,6 +4,7 @@ table1's smoke budget runs end to end into a report."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 
 import pytest
 
@@ -124,4 +125,20 @@ def test_calibration_smoke_and_its_numbers(tmp_path):
     assert main(["reproduce", "calibration", "--budget", "smoke", "--dir", str(tmp_path),
                  "--no-progress"]) == 0  # fmt: skip
     text = (tmp_path / "report" / "calibration.md").read_text()
-    assert "Hopper-v5: Spearman" in text and (tmp_path / "report" / "calibration.csv").is_file()
+    assert "Hopper-v5: Spearman" in text and "Pearson" in text
+    assert (tmp_path / "report" / "calibration.csv").is_file()
+
+
+def test_calibration_correlations_against_hand_computed():
+    """Spearman ranks, Pearson weighs distances: one outlier in proxy return leaves the ranks
+    perfectly ordered but pulls r below 1 (r of (1, 2, 3, 4) and (1, 2, 3, 10): 0.8854)."""
+    from ilfo.experiments.calibration import CalibrationPoint, pearson, spearman
+
+    points = [
+        CalibrationPoint("p", 0.0, k, float(score), float(proxy), 0.0)
+        for k, (score, proxy) in enumerate([(1, 1), (2, 2), (3, 3), (4, 10)])
+    ]
+    assert spearman(points) == pytest.approx(1.0)
+    assert pearson(points) == pytest.approx(0.8854, abs=1e-4)
+    reversed_points = [dataclasses.replace(p, proxy_return=-p.proxy_return) for p in points]
+    assert pearson(reversed_points) == pytest.approx(-0.8854, abs=1e-4)
