@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 
+import numpy as np
 import pytest
 
 from ilfo.algos import ALGOS
@@ -142,3 +143,21 @@ def test_calibration_correlations_against_hand_computed():
     assert pearson(points) == pytest.approx(0.8854, abs=1e-4)
     reversed_points = [dataclasses.replace(p, proxy_return=-p.proxy_return) for p in points]
     assert pearson(reversed_points) == pytest.approx(-0.8854, abs=1e-4)
+
+
+def test_calibration_correlations_are_nan_without_warning_when_undefined():
+    """A smoke horizon can leave every task score equal: the correlation is undefined, so it is
+    NaN, quietly: any warning fails this test."""
+    import warnings
+
+    from ilfo.experiments.calibration import CalibrationPoint, pearson, spearman
+
+    constant_score = [CalibrationPoint("p", 0.0, k, 1.0, float(k), 0.0) for k in range(4)]
+    one_episode = constant_score[:1]
+    varied = [CalibrationPoint("p", 0.0, k, float(k), float(k * k), 0.0) for k in range(4)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for points in (constant_score, one_episode, []):
+            assert np.isnan(spearman(points))
+            assert np.isnan(pearson(points))
+        assert spearman(varied) == pytest.approx(1.0)

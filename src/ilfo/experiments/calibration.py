@@ -114,22 +114,36 @@ def calibrate(
     return points
 
 
+def _score_proxy_arrays(points: Sequence[CalibrationPoint]) -> tuple[np.ndarray, np.ndarray] | None:
+    """The two returns as arrays, or None where a correlation is undefined: fewer than two
+    episodes, or either return constant (e.g. a smoke horizon too short to score)."""
+    scores = np.array([p.task_score for p in points], dtype=np.float64)
+    proxies = np.array([p.proxy_return for p in points], dtype=np.float64)
+    if len(points) < 2 or np.ptp(scores) == 0 or np.ptp(proxies) == 0:
+        return None
+    return scores, proxies
+
+
 def spearman(points: Sequence[CalibrationPoint]) -> float:
-    """Rank correlation of task score and proxy return over all episodes."""
+    """Rank correlation of task score and proxy return over all episodes; NaN, without a
+    warning, where it is undefined (fewer than two episodes, or a constant return)."""
     from scipy.stats import spearmanr
 
-    return float(
-        spearmanr([p.task_score for p in points], [p.proxy_return for p in points]).statistic
-    )
+    arrays = _score_proxy_arrays(points)
+    if arrays is None:
+        return float("nan")
+    return float(spearmanr(*arrays).statistic)
 
 
 def pearson(points: Sequence[CalibrationPoint]) -> float:
     """Linear correlation of task score and proxy return over all episodes: what the paper's
     scatter plots show. Spearman's ranks are pulled down where many poor policies tie on the
-    floor of both returns (their order there is noise); Pearson's r weighs them by distance."""
-    scores = np.array([p.task_score for p in points])
-    proxies = np.array([p.proxy_return for p in points])
-    return float(np.corrcoef(scores, proxies)[0, 1])
+    floor of both returns (their order there is noise); Pearson's r weighs them by distance.
+    NaN, without a warning, where it is undefined, as :func:`spearman`."""
+    arrays = _score_proxy_arrays(points)
+    if arrays is None:
+        return float("nan")
+    return float(np.corrcoef(*arrays)[0, 1])
 
 
 def write_calibration(results: dict[str, list[CalibrationPoint]], out: Path) -> list[Path]:
