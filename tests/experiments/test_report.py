@@ -52,13 +52,35 @@ def test_bootstrap_interval_matches_scipy_on_one_task():
 
 def test_bootstrap_is_stratified_by_task():
     """Task A's runs are all 0, task B's all 1 (different counts, NaN padding): resampling each
-    task from its own runs keeps the pooled mean at 5/8 in every sample; pooling the runs first
-    would not."""
+    task from its own runs keeps the pooled IQM's runs 3 to 5, and the mean of task means at
+    1/2, in every sample; pooling the runs first would not."""
     scores = np.full((5, 2), np.nan)
     scores[:3, 0] = 0.0
     scores[:, 1] = 1.0
     interval = stats.stratified_bootstrap(scores, stats.mean, resamples=500)
-    assert (interval.value, interval.low, interval.high) == pytest.approx((5 / 8,) * 3)
+    assert (interval.value, interval.low, interval.high) == pytest.approx((1 / 2,) * 3)
+    pooled_iqm = scipy_stats.trim_mean([0.0] * 3 + [1.0] * 5, 0.25)
+    interval = stats.stratified_bootstrap(scores, stats.iqm, resamples=500)
+    assert (interval.value, interval.low, interval.high) == pytest.approx((pooled_iqm,) * 3)
+
+
+def test_mean_and_median_are_over_task_means_as_rliable():
+    """rliable's aggregate_mean and aggregate_median: the mean and the median of the per-task
+    mean runs, so a task's seed count does not weigh it; IQM pools the runs."""
+    one_task = np.array([0.0, 0.0, 0.0, 1.0, 1.0])
+    assert stats.median(one_task) == pytest.approx(0.4)  # the runs' median would be 0
+    assert stats.mean(one_task) == pytest.approx(0.4)
+    scores = np.full((4, 3), np.nan)
+    scores[:, 0] = [0.0, 0.0, 0.0, 0.0]
+    scores[:2, 1] = [1.0, 1.0]
+    scores[:3, 2] = [0.2, 0.5, 0.8]
+    assert stats.mean(scores) == pytest.approx((0.0 + 1.0 + 0.5) / 3)  # runs' mean: 3.5/9
+    assert stats.median(scores) == pytest.approx(0.5)
+    for aggregate in (stats.mean, stats.median):  # vectorised, as called once per draw
+        fast = stats.stratified_bootstrap(scores, aggregate, resamples=300, seed=4)
+        wrapped = lambda s, a=aggregate: a(s)  # noqa: E731 (not in _ROWWISE: one call per draw)
+        slow = stats.stratified_bootstrap(scores, wrapped, resamples=300, seed=4)
+        assert (fast.low, fast.high) == pytest.approx((slow.low, slow.high))
 
 
 def test_profile_and_probability_of_improvement_by_hand():
@@ -321,7 +343,8 @@ def test_report_over_a_fixture_against_hand_computations(tmp_path):
     both = next(r for r in aggregates if r["algo"] == "oops-td3" and r["num_demos"] == "1")
     pooled = np.array([0.9, 1.0, 0.5, 0.95])  # Hopper's three seeds and Walker2d's one
     assert int(both["tasks"]) == 2 and int(both["runs"]) == 4
-    assert float(both["mean"]) == pytest.approx(pooled.mean())
+    assert float(both["mean"]) == pytest.approx((pooled[:3].mean() + 0.95) / 2)  # of task means
+    assert float(both["median"]) == pytest.approx((pooled[:3].mean() + 0.95) / 2)
     assert float(both["iqm"]) == pytest.approx(scipy_stats.trim_mean(pooled, 0.25))
     improvement = list(csv.DictReader((tmp_path / "report" / "improvement.csv").open()))
     first = next(r for r in improvement if (r["x"], r["y"]) == ("oops-td3", "pwil-td3"))

@@ -511,8 +511,8 @@ def _seeds_text(cell: Cell) -> str:
 
 
 def aggregate_rows(report: Report) -> list[dict[str, object]]:
-    """Per algo x demos x variant: IQM, mean and median over all its tasks' runs, each with a
-    95% stratified-bootstrap interval."""
+    """Per algo x demos x variant: the IQM of all its tasks' runs, the mean and the median of
+    its tasks' mean runs, each with a 95% stratified-bootstrap interval."""
     rows = []
     for algo, num_demos, variant in report.groups():
         envs = report.envs_of(algo, num_demos, variant)
@@ -694,8 +694,8 @@ def write_report(report: Report, out: str | Path, *, sources: Sequence[str] = ()
         "",
         "## Aggregates over tasks",
         "",
-        "| algo | demos | variant | tasks | runs | IQM [95% CI] | mean [95% CI] "
-        "| median [95% CI] |",
+        "| algo | demos | variant | tasks | runs | IQM [95% CI] | mean of tasks [95% CI] "
+        "| median of tasks [95% CI] |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for r in aggregates:

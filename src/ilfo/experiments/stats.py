@@ -4,11 +4,11 @@
 ilfo has its own small implementation instead of depending on rliable: rliable pins
 ``arch==5.3.0``, whose wheels predate NumPy 2 (ilfo needs NumPy >= 2.1), and pulls in pandas and
 seaborn for figures ilfo draws with matplotlib. The definitions follow rliable's: the
-interquartile mean of all runs pooled over tasks (``scipy.stats.trim_mean`` at 25%), percentile
-confidence intervals of a stratified bootstrap (the runs of each task resampled with replacement
-on their own), performance profiles (the share of runs scoring above tau) and the probability of
-improvement (Mann-Whitney U of each task, averaged over tasks). Tests compare them with SciPy
-and with hand computations.
+interquartile mean of all runs pooled over tasks (``scipy.stats.trim_mean`` at 25%), the mean and
+the median over tasks of each task's mean run, percentile confidence intervals of a stratified
+bootstrap (the runs of each task resampled with replacement on their own), performance profiles
+(the share of runs scoring above tau) and the probability of improvement (Mann-Whitney U of each
+task, averaged over tasks). Tests compare them with SciPy and with hand computations.
 
 A score set is a 2-D array ``(runs, tasks)``: one row per seed, one column per task; NaN marks a
 missing run of a task (tasks may have different numbers of seeds).
@@ -50,16 +50,23 @@ def iqm(scores: np.ndarray) -> float:
     return float(scipy_stats.trim_mean(values, 0.25))
 
 
+def _task_means(scores: np.ndarray) -> np.ndarray:
+    """Each task's mean over its finite runs (tasks without any left out)."""
+    return np.array([c.mean() for c in _task_columns(_runs(scores))])
+
+
 def mean(scores: np.ndarray) -> float:
-    """Mean of all runs of all tasks (each task weighted by its runs)."""
-    values = _runs(scores)
-    return float(np.nanmean(values)) if np.isfinite(values).any() else float("nan")
+    """Mean over tasks of each task's mean run, as rliable's ``aggregate_mean`` (each task
+    weighted alike, however many seeds it has)."""
+    means = _task_means(scores)
+    return float(means.mean()) if means.size else float("nan")
 
 
 def median(scores: np.ndarray) -> float:
-    """Median of all runs of all tasks."""
-    values = _runs(scores)
-    return float(np.nanmedian(values)) if np.isfinite(values).any() else float("nan")
+    """Median over tasks of each task's mean run, as rliable's ``aggregate_median`` (on one
+    task: that task's mean run)."""
+    means = _task_means(scores)
+    return float(np.median(means)) if means.size else float("nan")
 
 
 @dataclass(frozen=True)
@@ -78,13 +85,19 @@ def _resample_indices(rng: np.random.Generator, counts: list[int]) -> list[np.nd
     return [rng.integers(0, n, size=n) for n in counts]
 
 
-_ROWWISE: dict[Aggregate, Callable[[np.ndarray], np.ndarray]] = {
-    iqm: lambda pooled: scipy_stats.trim_mean(pooled, 0.25, axis=1),
-    mean: lambda pooled: pooled.mean(axis=1),
-    median: lambda pooled: np.median(pooled, axis=1),
+def _rowwise_task_means(pooled: np.ndarray, counts: list[int]) -> np.ndarray:
+    """(resamples, tasks) means of each task's block of a (resamples, runs) pooled array."""
+    starts = np.cumsum([0, *counts[:-1]])
+    return np.add.reduceat(pooled, starts, axis=1) / np.asarray(counts)
+
+
+_ROWWISE: dict[Aggregate, Callable[[np.ndarray, list[int]], np.ndarray]] = {
+    iqm: lambda pooled, counts: scipy_stats.trim_mean(pooled, 0.25, axis=1),
+    mean: lambda pooled, counts: _rowwise_task_means(pooled, counts).mean(axis=1),
+    median: lambda pooled, counts: np.median(_rowwise_task_means(pooled, counts), axis=1),
 }
-"""The aggregates that pool every run (``iqm``, ``mean``, ``median``) computed for all
-resamples at once."""
+"""The built-in aggregates computed for all resamples at once, from the pooled resampled runs
+and each task's number of runs."""
 
 
 def stratified_bootstrap(
@@ -110,7 +123,7 @@ def stratified_bootstrap(
     )
     rowwise = _ROWWISE.get(aggregate)
     if rowwise is not None:
-        samples = rowwise(pooled)
+        samples = rowwise(pooled, [c.size for c in columns])
     else:  # any other aggregate of a (runs, tasks) array: one call per resample
         bounds = np.cumsum([0] + [c.size for c in columns])
         width = max(c.size for c in columns)
