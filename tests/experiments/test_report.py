@@ -367,6 +367,9 @@ def test_report_reads_sweep_variants_and_percent_differences(tmp_path):
               scores=[0.4, 0.8])  # fmt: skip
     runs, _ = collect_runs([tmp_path])
     assert sorted((r.variant or "") for r in runs) == ["", "lambda_0.1"]
+    for inside in (sweep.root / "runs", sweep.root / "runs" / run.name):  # given a sweep's part
+        (alone,) = collect_runs([inside])[0]
+        assert alone.variant == "lambda_0.1"
     report = build_report(runs, resamples=200)
     variant = report.cell("Hopper-v5", "oops-td3", 1, "lambda_0.1")
     assert report.percent_difference(variant) == pytest.approx(100 * (0.6 - 0.8) / 0.8)

@@ -86,23 +86,33 @@ def collect_runs(paths: Iterable[str | Path]) -> tuple[list[RunResult], list[str
     from ilfo.experiments.sweep import MANIFEST_FILE, RUNS_DIR, open_sweep
 
     found: dict[Path, str | None] = {}  # run dir -> variant
+    variants: dict[Path, dict[str, str | None]] = {}  # sweep root -> run name -> variant
+
+    def variants_of(root: Path) -> dict[str, str | None]:
+        if root not in variants:
+            variants[root] = {run.name: run.variant for run in open_sweep(root).runs}
+        return variants[root]
+
     for given in map(Path, paths):
         if not given.exists():
             raise FileNotFoundError(f"{given}: no such sweep or run directory")
         sweeps = [given] if (given / MANIFEST_FILE).is_file() else []
         sweeps += [p.parent for p in given.rglob(MANIFEST_FILE) if p.parent != given]
         for root in sweeps:
-            sweep = open_sweep(root)
-            for run in sweep.runs:
-                if sweep.run_dir(run.name).is_dir():
-                    found.setdefault(sweep.run_dir(run.name).resolve(), run.variant)
+            for name, variant in variants_of(root).items():
+                if (root / RUNS_DIR / name).is_dir():
+                    found.setdefault((root / RUNS_DIR / name).resolve(), variant)
         candidates = [given] if _is_run_dir(given) else []
         candidates += [p.parent for p in given.rglob("config.json")]
         for path in candidates:
-            in_sweep = (
-                path.parent.name == RUNS_DIR and (path.parent.parent / MANIFEST_FILE).is_file()
-            )
-            if _is_run_dir(path) and not in_sweep:  # a sweep's runs come with their variants
+            if not _is_run_dir(path):
+                continue
+            root = path.parent.parent
+            if path.parent.name == RUNS_DIR and (root / MANIFEST_FILE).is_file():
+                # A sweep's run (given itself, or its runs/ folder): its variant is the manifest's.
+                if path.name in variants_of(root):
+                    found.setdefault(path.resolve(), variants_of(root)[path.name])
+            else:
                 found.setdefault(path.resolve(), None)
     runs, skipped = [], []
     for run_dir, variant in sorted(found.items()):
