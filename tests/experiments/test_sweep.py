@@ -270,8 +270,9 @@ class _FakeJob:
 
 
 class _FakeBackend:
-    """Jobs that end at once, as planned per run: 'done', 'error' (the worker says so) or
-    'kill' (a SIGKILL: nothing recorded by the worker)."""
+    """Jobs that end at once, as planned per run: 'done', 'error' (the worker says so), 'kill'
+    (a SIGKILL: nothing recorded by the worker) or 'crash' (exit 1 before it could record its
+    end, e.g. a full disk)."""
 
     slots = 2
 
@@ -289,6 +290,8 @@ class _FakeBackend:
             return _FakeJob(name, 0)
         if outcome == "error":
             record_attempt(sweep, name, "end", status="error", error="ValueError: boom")
+            return _FakeJob(name, 1)
+        if outcome == "crash":
             return _FakeJob(name, 1)
         return _FakeJob(name, -9)
 
@@ -310,6 +313,17 @@ def test_scheduler_skips_retries_and_gives_up(tmp_path):
     assert final[d].failures == 3 and "boom" in final[d].error
     killed = [e for e in read_attempts(sweep, c) if e.get("status") == "killed"]
     assert len(killed) == 1 and killed[0]["error"] == "worker exit -9"
+
+
+def test_a_worker_that_fails_without_recording_counts_as_a_failure(tmp_path):
+    """Exit 1 with no end record (it died before it could write one) is bounded by the retries,
+    not requeued forever."""
+    sweep = create_sweep(tmp_path, SweepSpec(config=TINY, retries=1))
+    (run,) = (r.name for r in sweep.runs)
+    backend = _FakeBackend({run: ["crash", "crash", "done"]})
+    (final,) = run_sweep(sweep, backend, poll_seconds=0)
+    assert backend.started == [run, run] and final.state == "failed" and final.failures == 2
+    assert final.error == "worker exit 1"
     # Started again, nothing is left to do: no run starts twice.
     backend = _FakeBackend({})
     run_sweep(sweep, backend, poll_seconds=0)
@@ -477,3 +491,23 @@ def test_cli_dry_run_on_an_existing_sweep_checks_the_spec_as_the_run_would(tmp_p
         assert main(["sweep", "run", str(root), *given, "--dry-run"]) == 0
         lines = capsys.readouterr().out.splitlines()
         assert lines == ["Hopper-v5__oops-td3__demos1__0  pending"]
+
+
+def test_cli_retries_alone_and_part_flags_over_a_spec_file(tmp_path, capsys):
+    """`--retries N` alone changes an existing sweep's retries (it was read as a new default
+    spec and refused); a part flag changes its one field of the spec file's part."""
+    from ilfo.cli import main
+
+    root = tmp_path / "sweep"
+    sweep = create_sweep(root, SweepSpec(config=TINY))
+    _finish(sweep, sweep.runs[0].name)
+    assert main(["sweep", "run", str(root), "--retries", "4", "--no-progress"]) == 0
+    assert open_sweep(root).spec.retries == 4
+    spec_file = tmp_path / "spec.json"
+    spec_file.write_text(json.dumps({"config": {**TINY, "td3": {"batch_size": 64}}}))
+    merged = create_sweep(
+        tmp_path / "merged", SweepSpec(config={**TINY, "td3": {"batch_size": 64, "tau": 0.01}})
+    )
+    given = ["--spec", str(spec_file), "--td3-tau", "0.01", "--dry-run"]
+    assert main(["sweep", "run", str(merged.root), *given]) == 0  # the same spec: batch_size kept
+    assert "holds another sweep" not in capsys.readouterr().err

@@ -112,7 +112,10 @@ def _train_settings(rest: list[str]) -> dict[str, Any]:
 
 
 def _spec_from_args(args: argparse.Namespace, rest: list[str]) -> Any:
-    from ilfo.experiments import SweepSpec, parse_seeds
+    import dataclasses
+
+    from ilfo.experiments import SweepSpec, open_sweep, parse_seeds
+    from ilfo.experiments.sweep import MANIFEST_FILE, merge_settings
     from ilfo.files import read_settings_file
 
     axes = {
@@ -122,11 +125,15 @@ def _spec_from_args(args: argparse.Namespace, rest: list[str]) -> Any:
         "seed": None if args.seeds is None else parse_seeds(args.seeds),
     }
     given = {k: v for k, v in axes.items() if v is not None}
-    if args.spec is None and not given and not rest and args.retries is None:
-        return None
+    if args.spec is None and not given and not rest:
+        if args.retries is None:
+            return None
+        if (Path(args.dir) / MANIFEST_FILE).is_file():  # the sweep there, with other retries
+            return dataclasses.replace(open_sweep(args.dir).spec, retries=args.retries)
     raw: dict[str, Any] = read_settings_file(args.spec) if args.spec else {}
     spec = SweepSpec.from_dict(raw, args.spec or "the command line")
-    config = {**spec.config, **_train_settings(rest)} if rest else dict(spec.config)
+    # A flag changes its one field of a part (--td3-tau), not the spec file's whole part.
+    config = merge_settings(spec.config, _train_settings(rest)) if rest else dict(spec.config)
     changes: dict[str, Any] = {**given, "config": config}
     if args.retries is not None:
         changes["retries"] = args.retries

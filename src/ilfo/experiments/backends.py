@@ -23,7 +23,14 @@ import time
 from collections.abc import Callable, Collection
 from typing import Any, Protocol
 
-from ilfo.experiments.sweep import RunStatus, Sweep, record_attempt, run_status, summary
+from ilfo.experiments.sweep import (
+    RunStatus,
+    Sweep,
+    read_attempts,
+    record_attempt,
+    run_status,
+    summary,
+)
 from ilfo.experiments.worker import PARENT_SIGNAL_ENV, thread_environment
 
 EXIT_DONE, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
@@ -231,11 +238,17 @@ def run_sweep(
         statuses[name] = run_status(sweep, by_name[name])
         return statuses[name]
 
+    def ends_recorded(name: str) -> int:
+        return sum(e.get("event") == "end" for e in read_attempts(sweep, name))
+
+    ends_at_start: dict[str, int] = {}
+
     try:
         while queue or active or elsewhere:
             for slot in range(backend.slots):
                 if slot not in active and queue:
                     name = queue.pop(0)
+                    ends_at_start[name] = ends_recorded(name)
                     active[slot] = backend.start(sweep, name, slot)
                     notify(list(statuses.values()), f"started {name}")
             time.sleep(poll_seconds)
@@ -244,8 +257,10 @@ def run_sweep(
                 if code is None:
                     continue
                 del active[slot]
-                if code not in (EXIT_DONE, EXIT_FAILED, EXIT_INTERRUPTED):
-                    # Killed (OOM, SIGKILL, a lost node): the worker could not say so itself.
+                if code != EXIT_INTERRUPTED and ends_recorded(job.name) == ends_at_start[job.name]:
+                    # Killed (OOM, SIGKILL, a lost node), or it failed before it could record
+                    # its end (a full disk, a bad pin): counted as a failure, so that the
+                    # retries bound it.
                     record_attempt(
                         sweep, job.name, "end", status="killed", error=f"worker exit {code}"
                     )

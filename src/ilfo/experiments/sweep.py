@@ -201,7 +201,7 @@ def expand(spec: SweepSpec) -> list[SweepRun]:
                 for variant, change in variants:
                     for num_demos in spec.num_demos:
                         name = run_name_of(env, algo, variant, num_demos, seed)
-                        settings = _merge(spec.config, change)
+                        settings = merge_settings(spec.config, change)
                         # A part's settings apply where the algo uses that part (a sweep over
                         # oops-td3 and pwil-td3 can set OOPS's lambda).
                         unused = [k for k in settings if k in PART_CONFIGS and k not in algo_parts]
@@ -231,7 +231,7 @@ def expand(spec: SweepSpec) -> list[SweepRun]:
     return runs
 
 
-def _merge(base: Mapping[str, Any], change: Mapping[str, Any]) -> dict[str, Any]:
+def merge_settings(base: Mapping[str, Any], change: Mapping[str, Any]) -> dict[str, Any]:
     """``base`` with ``change`` on top; a part's dicts merge field by field."""
     out = dict(base)
     for key, value in change.items():
