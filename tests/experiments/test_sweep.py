@@ -511,3 +511,30 @@ def test_cli_retries_alone_and_part_flags_over_a_spec_file(tmp_path, capsys):
     given = ["--spec", str(spec_file), "--td3-tau", "0.01", "--dry-run"]
     assert main(["sweep", "run", str(merged.root), *given]) == 0  # the same spec: batch_size kept
     assert "holds another sweep" not in capsys.readouterr().err
+
+
+@pytest.mark.skipif(
+    not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2,
+    reason="needs two CPUs to choose between",
+)
+def test_local_workers_pass_over_cpus_another_process_holds(tmp_path):
+    """Two `sweep run` processes on one sweep (disjoint --only): the second's first worker
+    takes a CPU the first's live worker is not pinned to."""
+    from ilfo.experiments.backends import LocalBackend
+
+    sweep = create_sweep(tmp_path, SweepSpec(seed=(0, 1), config=TINY))
+    first, second = (r.name for r in sweep.runs)
+    cpus = sorted(os.sched_getaffinity(0))
+    backend = LocalBackend(workers=1)
+    assert backend.cpu_set(sweep, 0) == cpus[:1]  # nothing held: the slot's own share
+    record_attempt(sweep, first, "start", pid=os.getpid(), cpus=cpus[:1])  # a live worker
+    assert backend.cpu_set(sweep, 0) == cpus[1:2]
+    record_attempt(sweep, first, "end", status="interrupted")  # it stopped: free again
+    assert backend.cpu_set(sweep, 0) == cpus[:1]
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True).stdout  # fmt: skip
+    record_attempt(sweep, second, "start", pid=int(dead), cpus=cpus[:1])  # killed, no end
+    assert backend.cpu_set(sweep, 0) == cpus[:1]
+    all_held = LocalBackend(workers=len(cpus))
+    record_attempt(sweep, second, "start", pid=os.getpid(), cpus=cpus)
+    assert all_held.cpu_set(sweep, 1) == cpus[1:2]  # too few free: the slot's own share

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -80,8 +81,41 @@ class _ProcessJob:
             self.process.send_signal(signal.SIGINT)
 
 
+def _alive(pid: object) -> bool:
+    if not isinstance(pid, int) or pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # alive, another user's
+        return True
+    return True
+
+
+def cpus_of_live_workers(sweep: Sweep, exclude_pids: Collection[int] = ()) -> set[int]:
+    """The CPUs that the sweep's live workers on this host were pinned to (their last start
+    record without an end after it, whose process is alive), other than ``exclude_pids``'s:
+    what another ``sweep run`` process on the same sweep holds."""
+    host = socket.gethostname()
+    claimed: set[int] = set()
+    for run in sweep.runs:
+        events = read_attempts(sweep, run.name)
+        starts = [i for i, e in enumerate(events) if e.get("event") == "start"]
+        if not starts or any(e.get("event") == "end" for e in events[starts[-1] + 1 :]):
+            continue
+        start = events[starts[-1]]
+        pid = start.get("pid")
+        if start.get("host") == host and pid not in exclude_pids and _alive(pid):
+            claimed.update(int(c) for c in start.get("cpus") or ())
+    return claimed
+
+
 class LocalBackend:
-    """Worker processes on this machine, each pinned to ``cores_per_run`` CPUs of its own."""
+    """Worker processes on this machine, each pinned to ``cores_per_run`` CPUs of its own: CPUs
+    that another ``sweep run`` process's live workers on the same sweep hold are passed over
+    where enough others are free (two processes with disjoint ``--only`` would otherwise both
+    pin their first worker to the first CPU)."""
 
     def __init__(self, cores_per_run: int = 1, workers: int | None = None) -> None:
         cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
@@ -98,16 +132,34 @@ class LocalBackend:
             )
         self.cores_per_run = cores_per_run
         self.slots = fit if workers is None else workers
-        self.cpu_sets = (
+        self.cpus = cpus
+        self.cpu_sets: list[list[int] | None] = (
             [cpus[i * cores_per_run : (i + 1) * cores_per_run] for i in range(self.slots)]
             if cpus is not None
             else [None] * self.slots
         )
+        self._jobs: dict[int, _ProcessJob] = {}  # slot -> its latest job
+
+    def cpu_set(self, sweep: Sweep, slot: int) -> list[int] | None:
+        """The CPUs for a new worker in ``slot``: the first ``cores_per_run`` of this process's
+        CPUs that neither its other slots nor another process's live workers on the sweep
+        hold; the slot's own share where that leaves too few."""
+        if self.cpus is None:
+            return None
+        ours = {slot_ for slot_, job in self._jobs.items() if job.poll() is None}
+        taken = cpus_of_live_workers(sweep, {self._jobs[s].process.pid for s in ours})
+        for other in ours - {slot}:
+            taken.update(self.cpu_sets[other] or ())
+        free = [c for c in self.cpus if c not in taken]
+        if len(free) < self.cores_per_run:
+            return self.cpu_sets[slot]
+        self.cpu_sets[slot] = free[: self.cores_per_run]
+        return self.cpu_sets[slot]
 
     def start(self, sweep: Sweep, name: str, slot: int) -> Job:
         env = {
             **os.environ,
-            **thread_environment(self.cores_per_run, self.cpu_sets[slot]),
+            **thread_environment(self.cores_per_run, self.cpu_set(sweep, slot)),
             PARENT_SIGNAL_ENV: "1",
         }
         log = sweep.log_file(name)
@@ -121,7 +173,8 @@ class LocalBackend:
                 stderr=subprocess.STDOUT,
                 start_new_session=True,  # Ctrl-C at the terminal reaches the sweep, which relays it
             )
-        return _ProcessJob(name, process)
+        self._jobs[slot] = _ProcessJob(name, process)
+        return self._jobs[slot]
 
     def close(self) -> None:
         pass
