@@ -538,3 +538,45 @@ def test_local_workers_pass_over_cpus_another_process_holds(tmp_path):
     all_held = LocalBackend(workers=len(cpus))
     record_attempt(sweep, second, "start", pid=os.getpid(), cpus=cpus)
     assert all_held.cpu_set(sweep, 1) == cpus[1:2]  # too few free: the slot's own share
+
+
+def test_a_queued_run_another_process_started_is_waited_for_not_started(tmp_path):
+    """The queue is read at the start; a run that another `sweep run` process starts meanwhile
+    is checked again before its start, waited for, and never started here."""
+    sweep = create_sweep(tmp_path, SweepSpec(seed=(0, 1), config=TINY))
+    a, b = (r.name for r in sweep.runs)
+    sweep.run_dir(b).mkdir(parents=True)
+    other_process = RunLock(sweep.run_dir(b))
+
+    class OneSlot(_FakeBackend):
+        slots = 1
+
+        def start(self, sweep, name, slot):
+            if name == a:
+                other_process.acquire()  # meanwhile, elsewhere, b starts
+            return super().start(sweep, name, slot)
+
+    def on_change(statuses, message):
+        if {s.name: s.state for s in statuses}.get(b) == "running":
+            _finish(sweep, b)  # the other process finishes b
+            other_process.release()
+
+    backend = OneSlot({a: ["done"], b: ["done"]})
+    final = {s.name: s for s in run_sweep(sweep, backend, poll_seconds=0, on_change=on_change)}
+    assert backend.started == [a] and final[b].state == "done"
+
+
+def test_a_worker_finding_its_run_held_elsewhere_exits_busy_not_failed(tmp_path):
+    from ilfo.experiments.worker import EXIT_BUSY, main
+
+    sweep = create_sweep(tmp_path, SweepSpec(config=TINY, retries=0))
+    (run,) = (r.name for r in sweep.runs)
+    sweep.run_dir(run).mkdir(parents=True)
+    lock = RunLock(sweep.run_dir(run)).acquire()
+    try:
+        assert main([str(sweep.root), run]) == EXIT_BUSY
+    finally:
+        lock.release()
+    assert read_attempts(sweep, run)[-1]["status"] == "busy"
+    status = run_status(sweep, sweep.run(run))
+    assert status.state == "pending" and status.failures == 0

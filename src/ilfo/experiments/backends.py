@@ -32,7 +32,7 @@ from ilfo.experiments.sweep import (
     run_status,
     summary,
 )
-from ilfo.experiments.worker import PARENT_SIGNAL_ENV, thread_environment
+from ilfo.experiments.worker import EXIT_BUSY, PARENT_SIGNAL_ENV, thread_environment
 
 EXIT_DONE, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
 PROGRESS_SECONDS = 10.0
@@ -301,6 +301,11 @@ def run_sweep(
             for slot in range(backend.slots):
                 if slot not in active and queue:
                     name = queue.pop(0)
+                    state = refresh(name).state  # another process may have started it since
+                    if state != "pending":
+                        if state == "running":
+                            elsewhere.append(name)
+                        continue
                     ends_at_start[name] = ends_recorded(name)
                     active[slot] = backend.start(sweep, name, slot)
                     notify(list(statuses.values()), f"started {name}")
@@ -320,6 +325,8 @@ def run_sweep(
                 status = refresh(job.name)
                 if status.state == "pending":
                     queue.append(job.name)  # an error within the retries, or an interruption
+                elif status.state == "running":  # another process trains it: wait for that
+                    elsewhere.append(job.name)
                 notify(list(statuses.values()), f"{job.name}: {_ended(status, code)}")
             for name in list(elsewhere):
                 status = refresh(name)
@@ -352,6 +359,8 @@ def _ended(status: RunStatus, code: int) -> str:
         return "done"
     if code == EXIT_INTERRUPTED:
         return "interrupted (checkpointed; it continues)"
+    if code == EXIT_BUSY:
+        return "held by another process; not counted as a failure"
     if status.state == "failed":
         return f"failed {status.failures} times, given up: {status.error}"
     return f"failed ({status.error}); will retry"

@@ -534,7 +534,8 @@ def read_attempts(sweep: Sweep, name: str) -> list[dict[str, Any]]:
 
 def record_attempt(sweep: Sweep, name: str, event: str, **fields: Any) -> None:
     """Append one attempt record with the host and time: ``start``, ``end`` (with a status:
-    done, interrupted, error, killed) or ``reset`` (the failures before it no longer count)."""
+    done, interrupted, error, killed, busy) or ``reset`` (the failures before it no longer
+    count)."""
     path = sweep.attempts_file(name)
     path.parent.mkdir(parents=True, exist_ok=True)
     line = {"event": event, "time": time.time(), "host": socket.gethostname(), **fields}

@@ -22,6 +22,8 @@ CPUS_ENV = "ILFO_CPUS"
 PARENT_SIGNAL_ENV = "ILFO_PARENT_DEATH_SIGNAL"
 """Set by the local backend: the worker gets SIGINT when its sweep process dies (Linux), so
 a killed sweep leaves no orphan runs behind, each checkpointed where it stood."""
+EXIT_BUSY = 75
+"""A worker's exit when another process holds its run's lock (BSD's EX_TEMPFAIL)."""
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
@@ -80,12 +82,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     run = sweep.run(args[1])
     threads = {name: os.environ.get(name) for name in (*THREAD_VARIABLES, "XLA_FLAGS")}
     record_attempt(sweep, run.name, "start", pid=os.getpid(), cpus=cpus, threads=threads)
+    from ilfo.training.run_dir import RunDirInUse
+
     try:
         if run_status(sweep, run).state != "done":
             train_run(sweep.run_dir(run.name), run.config)
     except KeyboardInterrupt:
         record_attempt(sweep, run.name, "end", status="interrupted")
         return 130
+    except RunDirInUse as err:  # another process trains it (or glanced at its lock): no failure
+        record_attempt(sweep, run.name, "end", status="busy", error=str(err))
+        return EXIT_BUSY
     except BaseException as err:  # recorded for the sweep's status and retries
         message = f"{type(err).__name__}: {err}"
         record_attempt(
