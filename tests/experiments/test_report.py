@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import math
 
 import numpy as np
 import pytest
@@ -97,6 +98,17 @@ def test_profile_and_probability_of_improvement_by_hand():
     assert 0 <= interval.low <= interval.value <= interval.high <= 1
     profile, low, high = stats.performance_profile_band(a, np.array([0.0]), resamples=200)
     assert low[0] <= profile[0] <= high[0]
+
+
+def test_a_diverged_run_is_flagged_not_called_below_the_paper(tmp_path):
+    """A NaN final evaluation makes its cell's mean NaN: flagged as such, and the report (its
+    profile's band included: no finite run at all) still written."""
+    _fake_run(tmp_path, "h0", env="Hopper-v5", algo="oops-td3", seed=0, scores=[0.5, math.nan])
+    report = build_report(collect_runs([tmp_path])[0], resamples=50)
+    assert report.cell("Hopper-v5", "oops-td3", 1).versus_paper == "non-finite score"
+    assert "report.md" in {p.name for p in write_report(report, tmp_path / "out", sources=[])}
+    profile, low, high = stats.performance_profile_band(np.full((2, 1), np.nan), [0.5])
+    assert np.isnan([profile, low, high]).all()
 
 
 def test_paper_data_has_the_tables():
@@ -235,7 +247,7 @@ def test_runs_whose_reward_settings_differ_from_the_algos_are_a_cell_of_their_ow
     }
     assert read_run(tmp_path / "own", "w_greedy").variant == "w_greedy"  # a sweep's says how
     report = build_report(runs, resamples=100)
-    assert report.cell("Walker2d-v5", "pwil-td3", 1).versus_paper is not None
+    assert report.cell("Walker2d-v5", "pwil-td3", 1).versus_paper == "within"  # 0.71 +- 2 * 0.3
     assert len(report.cell("Walker2d-v5", "pwil-td3", 1).runs) == 3
 
 

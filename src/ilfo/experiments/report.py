@@ -390,11 +390,14 @@ class Cell:
     @property
     def versus_paper(self) -> str:
         """``within`` / ``above`` / ``below`` the paper's mean +- 2 std, ``other demos`` where
-        runs imitated other demos than the shipped expert's, or empty (no paper number)."""
+        runs imitated other demos than the shipped expert's, ``non-finite score`` where a run's
+        final evaluation is NaN or infinite, or empty (no paper number)."""
         if self.paper is None or self.paper.std is None or self.variant is not None:
             return ""
         if not all(r.shipped_demos for r in self.runs):
             return "other demos"
+        if not np.isfinite(self.mean):  # a run's evaluation was NaN or infinite (diverged)
+            return "non-finite score"
         gap = self.mean - self.paper.mean
         if abs(gap) <= 2 * self.paper.std:
             return "within"

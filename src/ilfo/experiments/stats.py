@@ -162,6 +162,9 @@ def performance_profile_band(
     scores = _runs(scores)
     columns = _task_columns(scores)
     taus = np.asarray(taus, dtype=float)
+    if not columns:  # no finite run: no profile
+        nan = np.full(taus.shape, np.nan)
+        return nan, nan.copy(), nan.copy()
     rng = np.random.default_rng(seed)
     samples = np.empty((resamples, taus.size))
     counts = [c.size for c in columns]
