@@ -100,6 +100,18 @@ def test_profile_and_probability_of_improvement_by_hand():
     assert low[0] <= profile[0] <= high[0]
 
 
+def test_a_run_is_finished_by_its_last_episode_not_its_last_evaluation(tmp_path):
+    """A budget of 2,500 steps with evaluations every 1,000: the last evaluation is at 2,000,
+    and the run is finished once an episode reached 2,500."""
+    run = _fake_run(tmp_path, "r", env="Hopper-v5", algo="oops-td3", seed=0, scores=[0.5, 0.6],
+                    steps=2500)  # fmt: skip
+    assert not read_run(run).finished
+    with (run / "metrics.csv").open("a") as f:
+        f.write("2500,5,,\n")
+    result = read_run(run)
+    assert result.finished and result.final_step == 2000 and result.final_score == 0.6
+
+
 def test_a_diverged_run_is_flagged_not_called_below_the_paper(tmp_path):
     """A NaN final evaluation makes its cell's mean NaN: flagged as such, and the report (its
     profile's band included: no finite run at all) still written."""

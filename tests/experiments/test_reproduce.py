@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -88,6 +89,17 @@ def test_table1_smoke_runs_into_a_report(tmp_path, capsys, monkeypatch):
     assert all(r["finished"] == "True" and r["versus_paper"] == "other demos" for r in rows)
     text = (root / "report" / "report.md").read_text()
     assert all(f"{a}: not built yet" in text for a in TABLE1_ALGOS if a not in ALGOS)
+
+    def worker_starts():
+        files = (root / "table1" / "attempts").glob("*.jsonl")
+        return sum(line.count('"event": "start"') for f in files for line in f.open())
+
+    # Run again: everything is done, no worker starts, the report is rewritten.
+    started = worker_starts()
+    (root / "report" / "report.md").unlink()
+    assert main(["reproduce", "table1", "--budget", "smoke", "--dir", str(root),
+                 "--no-progress"]) == 0  # fmt: skip
+    assert worker_starts() == started > 0 and (root / "report" / "report.md").is_file()
     # Table 3 and the solver figure measure these runs' final rollouts: reproduce's wiring with
     # the sweeps stubbed out (the runs above stand in for the experiments' own).
     from ilfo.experiments import reproduce as reproduce_module
@@ -105,10 +117,33 @@ def test_table1_smoke_runs_into_a_report(tmp_path, capsys, monkeypatch):
     paper = next(c for c in paper_cells() if c.table == "table3" and c.algo == "oops-td3"
                  and c.env == "Hopper-v5" and c.space == "s")  # fmt: skip
     assert f"({paper.mean:.2f})" in distances  # the paper's number beside ilfo's
-    assert (oops[0].run_dir / "distances.json").is_file()  # cached in the run
-    # Run again: everything is done, nothing trains, the report is rewritten.
-    assert main(["reproduce", "table1", "--budget", "smoke", "--dir", str(root),
-                 "--no-progress"]) == 0  # fmt: skip
+    cached = json.loads((oops[0].run_dir / "distances.json").read_text())  # cached in the run
+    assert cached["key"]["trained_step"] == oops[0].trained_step == oops[0].steps
+
+
+def test_measures_are_cached_per_trained_step_and_skip_unfinished_runs(tmp_path):
+    """A run trained on since its distances were measured is measured again; an unfinished
+    run's newest checkpoint is not its final policy, so it is left out, and said so."""
+    from types import SimpleNamespace
+
+    from ilfo.experiments.reproduce import _cached, write_distances
+
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return {"s": float(len(calls))}
+
+    run = SimpleNamespace(run_dir=tmp_path, trained_step=1000)
+    assert _cached(run, "d.json", 10, compute) == {"s": 1.0}
+    assert _cached(run, "d.json", 10, compute) == {"s": 1.0} and len(calls) == 1
+    assert _cached(run, "d.json", 5, compute) == {"s": 2.0}  # other episodes
+    run.trained_step = 2000
+    assert _cached(run, "d.json", 5, compute) == {"s": 3.0}  # trained on since
+    unfinished = SimpleNamespace(run_dir=tmp_path / "Hopper-v5__oops-td3__0", finished=False)
+    (out := tmp_path / "out").mkdir()
+    write_distances([unfinished], out)
+    assert "Not measured, unfinished: Hopper-v5__oops-td3__0." in (out / "distances.md").read_text()
 
 
 def test_calibration_smoke_and_its_numbers(tmp_path):

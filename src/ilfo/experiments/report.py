@@ -58,6 +58,8 @@ class RunResult:
     shipped_demos: bool = True
     """Whether it imitated the env's shipped expert demos (the only ones the paper's numbers
     can be compared with)."""
+    trained_step: int | None = None
+    """The step its last episode reached (metrics.csv's last row); None: its last evaluation's."""
     settings: tuple[str, ...] = ()
     """Where it was trained otherwise than ``ilfo train``'s defaults for its task and algo (the
     paper's protocol), e.g. ``("fast preset", "4 updates/step")``: what the cell key does not
@@ -73,7 +75,10 @@ class RunResult:
 
     @property
     def finished(self) -> bool:
-        return self.final_step >= self.steps
+        """Trained to its budget: its last episode, not its last evaluation (a budget that is
+        not a multiple of ``eval_every`` ends past the last one)."""
+        reached = self.final_step if self.trained_step is None else self.trained_step
+        return reached >= self.steps
 
 
 def _is_run_dir(path: Path) -> bool:
@@ -246,7 +251,8 @@ def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | Non
     variant = "+".join(label for label in labels if label) or None
     if not (run_dir / "metrics.csv").is_file():  # a sweep's run before its first episode
         return None
-    rows = [r for r in read_metrics(run_dir) if r.get(SCORE)]
+    all_rows = read_metrics(run_dir)
+    rows = [r for r in all_rows if r.get(SCORE)]
     if not rows:
         return None
     return RunResult(
@@ -262,6 +268,7 @@ def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | Non
         final_return=float(rows[-1][RETURN]) if rows[-1].get(RETURN) else math.nan,
         shipped_demos=shipped,
         settings=_training_settings(config, run_dir / "config.json"),
+        trained_step=int(all_rows[-1]["step"]),
     )
 
 

@@ -404,18 +404,35 @@ def reproduce(
     return the_plan, written
 
 
-def _cached(run_dir: Path, name: str, compute: Any) -> dict[str, float]:
-    """``compute()``'s values for a run, kept in its directory as ``name`` (computed once)."""
+def _cached(run: Any, name: str, episodes: int, compute: Any) -> dict[str, float]:
+    """``compute()``'s values for a run, kept in its directory as ``name``: computed again only
+    where the run trained on since (its last step) or other ``episodes`` are asked for."""
     import json
 
     from ilfo.files import write_json_atomic
 
-    cache = run_dir / name
+    cache = run.run_dir / name
+    key = {"trained_step": run.trained_step, "episodes": episodes}
     if cache.is_file():
-        return json.loads(cache.read_text())
+        kept = json.loads(cache.read_text())
+        if kept.get("key") == key:
+            return kept["values"]
     values = compute()
-    write_json_atomic(cache, values)
+    write_json_atomic(cache, {"key": key, "values": values})
     return values
+
+
+def _finished(runs: list[Any]) -> tuple[list[Any], list[str]]:
+    """The runs trained to their budgets (their final policies are what is measured), and the
+    names of the others, left out."""
+    done = [r for r in runs if r.finished]
+    return done, [r.run_dir.name for r in runs if not r.finished]
+
+
+def _left_out_line(names: list[str]) -> list[str]:
+    if not names:
+        return []
+    return ["", f"Not measured, unfinished: {', '.join(names)}."]
 
 
 def write_distances(runs: list[Any], out: Path, episodes: int = 10) -> list[Path]:
@@ -427,11 +444,13 @@ def write_distances(runs: list[Any], out: Path, episodes: int = 10) -> list[Path
     from ilfo.experiments.distances import SPACES, run_distances
     from ilfo.experiments.paper import paper_cells
 
+    runs, unfinished = _finished(runs)
     per_cell: dict[tuple[str, str, int], list[dict[str, float]]] = {}
     for run in runs:
         values = _cached(
-            run.run_dir,
+            run,
             "distances.json",
+            episodes,
             lambda run=run: run_distances(run.run_dir, episodes=episodes, experts=episodes),
         )
         per_cell.setdefault((run.env, run.algo, run.num_demos), []).append(values)
@@ -465,6 +484,7 @@ def write_distances(runs: list[Any], out: Path, episodes: int = 10) -> list[Path
         lines.append(
             f"| {row['env']} | {row['algo']} | {row['num_demos']} | {row['seeds']} | {cells} |"
         )
+    lines += _left_out_line(unfinished)
     md_path = out / "distances.md"
     md_path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return [md_path, csv_path]
@@ -482,11 +502,13 @@ def write_solvers(runs: list[Any], out: Path, episodes: int = 10) -> list[Path]:
     from ilfo.experiments.distances import SOLVER_LAMBDAS, final_rollouts, solver_distances
     from ilfo.experiments.report import finish_figure
 
+    runs, unfinished = _finished(runs)
     rows = []
     for run in runs:
         values = _cached(
-            run.run_dir,
+            run,
             "solvers.json",
+            episodes,
             lambda run=run: solver_distances(
                 *final_rollouts(run.run_dir, episodes=episodes, experts=episodes)
             ),
@@ -531,6 +553,7 @@ def write_solvers(runs: list[Any], out: Path, episodes: int = 10) -> list[Path]:
         written.append(
             finish_figure(fig, ax, title, "Sinkhorn lambda", "transport cost <C, P>", path)
         )
+    lines += _left_out_line(unfinished)
     md_path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return written
 
