@@ -110,7 +110,7 @@ class TD3Config:
     bootstrapping cut at k = 1: a valid finite-horizon backup, ``augment_time``) or
     "next_only" (only the next observation's time redrawn from {1, ..., max_time}, the current
     time and the end-of-episode flag as recorded, ``redraw_next_time``: the paper's code as
-    shared/design/reference-notes.md describes it)."""
+    the design notes beside the repo, ../shared/design/reference-notes.md, describe it)."""
     init_scheme: InitName = "torch"
     """Network initialisation: "torch" (PyTorch's nn.Linear default, uniform +-1/sqrt(fan_in)
     for weights and biases, as the paper's and Fujimoto's code), "flax" (LeCun normal, zero

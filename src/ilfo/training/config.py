@@ -61,8 +61,8 @@ class TrainConfig:
     """Seed of everything: environment, exploration, networks, demo draws."""
     fixed_horizon: bool | None = None
     """Run every episode to the full horizon, ignoring termination (the paper); None: on for
-    imitation (except sil and firl-fkl: off, as their authors' code), off for true-reward
-    algos."""
+    imitation (except sil and firl-fkl, off as their authors' code, and pwil-td3, off as
+    measured: docs/results.md), off for true-reward algos."""
     horizon: int | None = None
     """Episode length; None: the environment's limit (1,000 for MuJoCo)."""
     healthy_angle_range: tuple[float, float] | None = None
