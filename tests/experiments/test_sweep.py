@@ -580,3 +580,29 @@ def test_a_worker_finding_its_run_held_elsewhere_exits_busy_not_failed(tmp_path)
     assert read_attempts(sweep, run)[-1]["status"] == "busy"
     status = run_status(sweep, sweep.run(run))
     assert status.state == "pending" and status.failures == 0
+
+
+def test_a_run_cut_short_by_hand_is_trained_to_the_manifests_budget(tmp_path, monkeypatch):
+    """`ilfo train --resume RUN --steps 200` on a sweep's 400-step run wrote 200 to its
+    config.json: the worker resumes it to the manifest's 400 (else it would end below its
+    budget at every start, never done), and never below a budget raised by hand."""
+    from types import SimpleNamespace
+
+    from ilfo.experiments.worker import train_run
+    from ilfo.training import Trainer
+
+    asked = []
+
+    def resume(run_dir, *, progress=True, steps=None, hooks=None):
+        asked.append(steps)
+        return SimpleNamespace(config=SimpleNamespace(steps=steps), step=0, last_eval=None,
+                               train=lambda: None)  # fmt: skip
+
+    monkeypatch.setattr(Trainer, "resume", resume)
+    sweep = create_sweep(tmp_path, SweepSpec(config=TINY))
+    (run,) = sweep.runs
+    sweep.run_dir(run.name).mkdir(parents=True)
+    for written in (200, 800):
+        (sweep.run_dir(run.name) / "config.json").write_text(json.dumps({"steps": written}))
+        train_run(sweep.run_dir(run.name), run.config)
+    assert asked == [400, 800]

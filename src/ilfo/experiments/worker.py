@@ -111,14 +111,18 @@ def train_run(run_dir: os.PathLike[str] | str, config: Mapping[str, object]) -> 
     from pathlib import Path
 
     from ilfo.compilation_cache import enable_compilation_cache
-    from ilfo.training import Trainer, config_from_dict
+    from ilfo.training import Trainer, config_from_dict, read_run_config
 
     enable_compilation_cache()
     run_dir = Path(run_dir)
     if (run_dir / "config.json").is_file():
+        # The manifest's budget at least: a run cut short by hand (`ilfo train --resume --steps`)
+        # would otherwise end below it at every start, never done, requeued forever.
+        written = int(read_run_config(run_dir)["steps"])
+        budget = max(written, int(config["steps"]))  # type: ignore[call-overload]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # "no complete checkpoint yet": expected here
-            trainer = Trainer.resume(run_dir, progress=False)
+            trainer = Trainer.resume(run_dir, progress=False, steps=budget)
     else:
         trainer = Trainer(config_from_dict(dict(config), run_dir), run_dir, progress=False)
     print(f"{run_dir.name}: training to step {trainer.config.steps:,} from {trainer.step:,}")
