@@ -492,3 +492,20 @@ def test_an_on_policy_run_continues_exactly_from_a_snapshot(tmp_path):
     (ckpt / "replay.omitted").write_text("{}")
     with pytest.raises(ValueError, match="on-policy run keeps its pending batch"):
         Trainer.resume(older, progress=False)
+
+
+def test_truncating_metrics_drops_rows_past_the_step_and_a_torn_row(tmp_path):
+    """Resume drops the rows logged after its checkpoint, and the last row a kill cut short
+    (here "3", the start of "3000,..."), through a renamed file (nothing left beside it)."""
+    from ilfo.training.metrics import METRIC_FIELDS, MetricsLog, read_metrics, truncate_metrics
+
+    log = MetricsLog(tmp_path)
+    for step in (1000, 2000, 2500):
+        log.write({"step": step, "episode": step // 1000, "proxy_return": -1.5})
+    with (tmp_path / "metrics.csv").open("a") as f:
+        f.write("3")
+    truncate_metrics(tmp_path / "metrics.csv", 2000)
+    rows = read_metrics(tmp_path)
+    assert [r["step"] for r in rows] == ["1000", "2000"] and list(rows[0]) == METRIC_FIELDS
+    assert rows[1]["proxy_return"] == "-1.5"
+    assert sorted(p.name for p in tmp_path.iterdir() if "metrics" in p.name) == ["metrics.csv"]

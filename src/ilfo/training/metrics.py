@@ -112,15 +112,19 @@ class TensorBoardLog:
 
 
 def truncate_metrics(path: Path, step: int) -> None:
-    """Drop rows logged after the checkpoint: the resumed run writes them again."""
+    """Drop rows logged after the checkpoint: the resumed run writes them again. A row cut
+    short by a kill (fewer fields than the header) is dropped too. The file is replaced
+    through a rename, so that a kill here loses nothing."""
     if not path.is_file():
         return
     with path.open(newline="") as f:
-        rows = list(csv.DictReader(f))
-    with path.open("w", newline="") as f:
+        rows = [r for r in csv.DictReader(f) if None not in r.values()]
+    tmp = path.with_name(f".{path.name}.tmp")
+    with tmp.open("w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=METRIC_FIELDS)
         writer.writeheader()
-        writer.writerows(r for r in rows if int(r["step"]) <= step)
+        writer.writerows(r for r in rows if r["step"].isdigit() and int(r["step"]) <= step)
+    os.replace(tmp, path)
 
 
 def read_metrics(run_dir: Path) -> list[dict[str, str]]:
