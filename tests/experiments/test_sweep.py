@@ -606,3 +606,13 @@ def test_a_run_cut_short_by_hand_is_trained_to_the_manifests_budget(tmp_path, mo
         (sweep.run_dir(run.name) / "config.json").write_text(json.dumps({"steps": written}))
         train_run(sweep.run_dir(run.name), run.config)
     assert asked == [400, 800]
+
+
+def test_an_attempt_record_after_a_torn_line_is_kept(tmp_path):
+    sweep = create_sweep(tmp_path, SweepSpec(config=TINY))
+    (run,) = (r.name for r in sweep.runs)
+    record_attempt(sweep, run, "start", pid=1)
+    with sweep.attempts_file(run).open("a") as f:
+        f.write('{"event": "en')  # a kill mid-write
+    record_attempt(sweep, run, "end", status="killed")
+    assert [e["event"] for e in read_attempts(sweep, run)] == ["start", "end"]

@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import fnmatch
 import json
+import os
 import socket
 import time
 from collections.abc import Mapping, Sequence
@@ -539,8 +540,13 @@ def record_attempt(sweep: Sweep, name: str, event: str, **fields: Any) -> None:
     path = sweep.attempts_file(name)
     path.parent.mkdir(parents=True, exist_ok=True)
     line = {"event": event, "time": time.time(), "host": socket.gethostname(), **fields}
-    with path.open("a", encoding="utf-8") as f:
-        f.write(json.dumps(line) + "\n")
+    with path.open("ab+") as f:  # appends go to the end whatever was read
+        end = f.seek(0, os.SEEK_END)
+        if end:
+            f.seek(end - 1)
+            if f.read(1) != b"\n":  # a line a kill cut short: ended, or this one is glued on
+                f.write(b"\n")
+        f.write((json.dumps(line) + "\n").encode())
 
 
 def summary(statuses: Sequence[RunStatus]) -> dict[str, int]:
