@@ -17,3 +17,10 @@ def _compilation_cache(tmp_path_factory):
     jax.config.update("jax_compilation_cache_dir", str(tmp_path_factory.mktemp("jax_cache")))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _sb3_logs(tmp_path_factory):
+    # Stable-Baselines3 makes a log directory in /tmp at each learn() unless told where; the
+    # tests' go with pytest's temporary files (subprocesses, such as the example, inherit it).
+    os.environ["SB3_LOGDIR"] = str(tmp_path_factory.mktemp("sb3_logs"))
