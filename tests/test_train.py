@@ -10,6 +10,7 @@ import pytest
 from ilfo.cli import main
 from ilfo.paths import bundled_demos
 from ilfo.training import TrainConfig, Trainer, load_demos
+from ilfo.training.metrics import METRIC_FIELDS
 from ilfo.training.run_dir import latest_checkpoint
 
 DEMOS = str(bundled_demos("Hopper-v5-scripted"))
@@ -78,11 +79,30 @@ def test_resume_after_a_crash_drops_rows_logged_after_the_checkpoint(tmp_path):
     full = _metrics(_train(tmp_path, "full", steps=400))
     run = _train(tmp_path, "crashed", steps=300)
     # A crash after step 400 was logged but before any checkpoint of it: a stale row.
-    with (run / "metrics.csv").open("a") as f:
-        f.write("400,4,9.9,1.0,-1,-1,,,,,,,\n")
+    with (run / "metrics.csv").open("a") as f:  # complete: a torn row is dropped whatever its step
+        f.write(",".join(["400", "4", "9.9", "1.0", "-1", "-1"] + [""] * (len(METRIC_FIELDS) - 6)))
+        f.write("\n")
     trainer = Trainer.resume(run, progress=False, steps=400)
     assert [int(r["step"]) for r in _metrics(run)] == [100, 200, 300]
     assert _metrics(trainer.train()) == full
+
+
+def test_a_run_past_its_budget_resumes_and_an_extended_one_drops_its_old_final_policy(tmp_path):
+    """Whole 100-step episodes take a 250-step run to 300: resuming it is no shortening (it
+    only writes its final policy again); extending it removes the 300-step final policy, which
+    `ilfo eval` would otherwise take for the extended run's until it ends."""
+    run = _train(tmp_path, "run", steps=250)
+    assert latest_checkpoint(run).name == "step_000000300"
+    trainer = Trainer.resume(run, progress=False)
+    assert trainer.step == 300 and (run / "policy.msgpack").is_file()
+    trainer.train()
+    assert (run / "policy.msgpack").is_file()
+    with pytest.raises(ValueError, match="would shorten it"):
+        Trainer.resume(run, progress=False, steps=200)
+    extended = Trainer.resume(run, progress=False, steps=400)
+    assert not (run / "policy.msgpack").exists()
+    extended.train()
+    assert (run / "policy.msgpack").is_file()
 
 
 @pytest.mark.parametrize("algo", ["oops-ddpg", "oops-sac", "pwil-td3", "td3"])
@@ -182,6 +202,20 @@ def test_a_reward_that_did_not_converge_is_reported_once(tmp_path):
         trainer.train()
     assert len([w for w in caught if "did not converge" in str(w.message)]) == 1
     assert trainer.unconverged_rewards == 3  # every episode, reported once
+
+
+def test_demos_whose_return_is_zero_leave_scores_unnormalised(tmp_path):
+    """Nothing to divide by: the scores are left unnormalised (a ZeroDivisionError at the
+    first evaluation before)."""
+    from ilfo import demos
+    from ilfo.training.build import load_demo_set
+
+    zeroed = [dataclasses.replace(e, rewards=np.zeros_like(e.rewards))
+              for e in demos.load(DEMOS).episodes[:2]]  # fmt: skip
+    path = tmp_path / "d.npz"
+    demos.save(path, zeroed, "Hopper-v5")
+    config = TrainConfig(**{**TINY, "demos": str(path), "num_demos": 2})
+    assert np.isnan(load_demo_set(config, 11).mean_return)
 
 
 def test_demos_in_which_the_expert_fell_are_named_in_a_warning(tmp_path):

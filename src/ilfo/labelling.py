@@ -189,9 +189,14 @@ def label_dataset(
         raise ValueError(f"{dataset}: labelling writes ilfo, Minari or D4RL files, not {fmt}")
     data = demo_io.load_any(dataset, env_id=env_id)
     expert = demo_io.load_any(demos_file)
-    expert_obs = [e.observations for e in expert.episodes[:num_demos]]
-    if not expert_obs:
+    if not expert.episodes:
         raise ValueError(f"{demos_file}: no demos")
+    if num_demos is not None and not 1 <= num_demos <= len(expert.episodes):
+        raise ValueError(
+            f"num_demos must be between 1 and {len(expert.episodes)} (the demos in "
+            f"{demos_file}), got {num_demos}"
+        )
+    expert_obs = [e.observations for e in expert.episodes[:num_demos]]
     if expert_obs[0].shape[1] != data.episodes[0].observations.shape[1]:
         raise ValueError(
             f"{demos_file} has {expert_obs[0].shape[1]}-dim observations, {dataset} has "

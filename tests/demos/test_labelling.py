@@ -71,6 +71,9 @@ def test_ilfo_round_trip(tmp_path):
         np.testing.assert_allclose(got.rewards, labeller(want.observations))
     with pytest.raises(FileExistsError):
         label_dataset(data, demo_path, tmp_path / "out.npz")
+    for bad in (0, -1, len(expert) + 1):  # -1 would have dropped the last demo silently
+        with pytest.raises(ValueError, match="num_demos must be between 1 and"):
+            label_dataset(data, demo_path, tmp_path / f"bad{bad}.npz", num_demos=bad)
 
 
 @pytest.mark.parametrize("next_obs", [True, False])

@@ -112,6 +112,7 @@ def train_run(run_dir: os.PathLike[str] | str, config: Mapping[str, object]) -> 
 
     from ilfo.compilation_cache import enable_compilation_cache
     from ilfo.training import Trainer, config_from_dict, read_run_config
+    from ilfo.training.run_dir import checkpoint_steps
 
     enable_compilation_cache()
     run_dir = Path(run_dir)
@@ -119,10 +120,13 @@ def train_run(run_dir: os.PathLike[str] | str, config: Mapping[str, object]) -> 
         # The manifest's budget at least: a run cut short by hand (`ilfo train --resume --steps`)
         # would otherwise end below it at every start, never done, requeued forever.
         written = int(read_run_config(run_dir)["steps"])
-        budget = max(written, int(config["steps"]))  # type: ignore[call-overload]
+        newest = checkpoint_steps(run_dir)[-1][0] if checkpoint_steps(run_dir) else 0
+        budget = max(written, int(config["steps"]), newest)  # type: ignore[call-overload]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # "no complete checkpoint yet": expected here
-            trainer = Trainer.resume(run_dir, progress=False, steps=budget)
+            trainer = Trainer.resume(
+                run_dir, progress=False, steps=budget if budget > written else None
+            )
     else:
         trainer = Trainer(config_from_dict(dict(config), run_dir), run_dir, progress=False)
     print(f"{run_dir.name}: training to step {trainer.config.steps:,} from {trainer.step:,}")

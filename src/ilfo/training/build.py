@@ -130,7 +130,8 @@ class DemoSet(NamedTuple):
     observations: list[np.ndarray]
     """Each (T_i + 1, obs_dim); empty for task-reward algos."""
     mean_return: float
-    """Their mean task score (what scores are divided by); NaN where none was recorded."""
+    """Their mean task score (what scores are divided by); NaN where none was recorded or it is
+    0 (scores are then left unnormalised)."""
     distance_probe: OOPS | None
     """OOPS against the first demo with the paper's defaults: the OT distance that evaluations
     log (None without demos)."""
@@ -152,7 +153,8 @@ def load_demo_set(config: TrainConfig, obs_dim: int) -> DemoSet:
             f"{config.env} has {obs_dim}"
         )
     returns = [e.task_score for e in episodes if e.task_score is not None]
-    mean = float(np.mean(returns)) if returns else math.nan
+    # NaN where none was recorded, or where they sum to 0 (nothing to divide a score by).
+    mean = float(np.mean(returns)) if returns and np.mean(returns) != 0 else math.nan
     path = demos_path(config)
     source = DemoSource(str(path.resolve()), file_sha256(path), len(episodes), mean)
     return DemoSet(observations, mean, OOPS(observations[:1]), source)

@@ -554,12 +554,16 @@ class Trainer:
                 )
             else:
                 trainer._restore(checkpoint)
-            if trainer.step > config.steps:
+            # Its last episode may have run past the budget (episodes end whole): that is no
+            # shortening unless a smaller budget was asked for.
+            if steps is not None and trainer.step > steps:
                 raise ValueError(
                     f"{run_dir} has done {trainer.step} steps already (its checkpoint): --steps "
-                    f"{config.steps} would shorten it; pass at least {trainer.step}"
+                    f"{steps} would shorten it; pass at least {trainer.step}"
                 )
             remove_incomplete_checkpoints(run_dir)
+            if trainer.step < config.steps:  # a final policy of a shorter budget is no longer
+                (run_dir / FINAL_POLICY_FILE).unlink(missing_ok=True)  # the run's final one
             if steps is not None:
                 write_json_atomic(run_dir / CONFIG_FILE, raw)
             trainer._check_demos_record()
