@@ -212,7 +212,19 @@ def label_dataset(
     )
     seconds = time.perf_counter() - start
     writers = {"ilfo": _write_ilfo, "minari": _write_minari, "d4rl": _write_d4rl}
-    writers[fmt](dataset, out, data, rewards)
+    # Written beside ``out`` and renamed into place: an error or a kill midway leaves no
+    # half-labelled file under the labelled name (and the name free for a retry).
+    partial = out.with_name(f".partial-{out.name}")  # its suffix kept: savez adds none
+    if partial.is_dir():
+        shutil.rmtree(partial)
+    partial.unlink(missing_ok=True)
+    try:
+        writers[fmt](dataset, partial, data, rewards)
+        os.replace(partial, out)
+    finally:
+        if partial.is_dir():
+            shutil.rmtree(partial)
+        partial.unlink(missing_ok=True)
     flat = np.concatenate(rewards)
     return LabelSummary(
         out, fmt, len(rewards), int(flat.size), seconds, float(flat.mean()), float(flat.std())

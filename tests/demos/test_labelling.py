@@ -76,6 +76,23 @@ def test_ilfo_round_trip(tmp_path):
             label_dataset(data, demo_path, tmp_path / f"bad{bad}.npz", num_demos=bad)
 
 
+def test_a_labelling_that_fails_midway_leaves_nothing_under_its_name(tmp_path, monkeypatch):
+    import ilfo.labelling
+
+    demo_path, _ = _demos(tmp_path)
+    data = tmp_path / "data.npz"
+    demos.save(data, _episodes(seed=1), "Hopper-v5")
+
+    def half_written(dataset, out, data, rewards):
+        out.write_bytes(b"half")
+        raise OSError("No space left on device")
+
+    monkeypatch.setattr(ilfo.labelling, "_write_ilfo", half_written)
+    with pytest.raises(OSError, match="No space"):
+        label_dataset(data, demo_path, tmp_path / "out.npz")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["data.npz", "demos.npz"]
+
+
 @pytest.mark.parametrize("next_obs", [True, False])
 def test_d4rl_round_trip(tmp_path, next_obs):
     demo_path, expert = _demos(tmp_path)
