@@ -431,6 +431,12 @@ def test_updates_per_step_below_one_is_an_error():
     assert TrainConfig(**{**TINY, "algo": "sil"}).updates_per_step == 1
 
 
+def test_a_replay_buffer_smaller_than_an_episode_is_refused_at_the_start(tmp_path):
+    config = TrainConfig(**{**TINY, "replay_capacity": 99})  # the horizon is 100
+    with pytest.raises(ValueError, match=r"replay_capacity .* at least the horizon, 100; got 99"):
+        Trainer(config, tmp_path / "run", progress=False)
+
+
 @pytest.mark.parametrize(
     ("field", "value"),
     [

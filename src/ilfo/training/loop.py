@@ -205,7 +205,10 @@ class Trainer:
         bar = _progress_bar(cfg.steps, self.step, self.progress)
         start_wall = time.perf_counter() - self.elapsed
         next_checkpoint = (self.step // cfg.checkpoint_every + 1) * cfg.checkpoint_every
-        last_checkpoint, last_checkpoint_time = self.step, time.monotonic()
+        # The step of the newest checkpoint; None before the first (a second Ctrl-C can come
+        # before any).
+        last_checkpoint: int | None = self.step if latest_checkpoint(self.run_dir) else None
+        last_checkpoint_time = time.monotonic()
         checkpoint_seconds = 60.0 * cfg.checkpoint_minutes or math.inf
         try:
             with _stop_requests() as stop:
@@ -237,10 +240,12 @@ class Trainer:
             # A stop request is honoured at an episode boundary, just checkpointed; a second
             # Ctrl-C quits at once, and the last checkpoint (consistent by construction) stays.
             bar.close()
-            print(
-                f"\ninterrupted: checkpoint at step {last_checkpoint}; continue with "
-                f"`{self.resume_command}`"
+            where = (
+                "before the first checkpoint (it starts again from step 0)"
+                if last_checkpoint is None
+                else f"checkpoint at step {last_checkpoint}"
             )
+            print(f"\ninterrupted: {where}; continue with `{self.resume_command}`")
             raise
         bar.close()
 
@@ -448,6 +453,11 @@ class Trainer:
             capacity = funcs.batch_steps + self.horizon
         else:
             capacity = self.config.replay_capacity
+            if capacity < self.horizon:  # else it fails at the first episode's end
+                raise ValueError(
+                    f"replay_capacity (--replay-capacity) must hold an episode: at least the "
+                    f"horizon, {self.horizon}; got {capacity}"
+                )
         return ReplayBuffer(capacity, obs_dim, self.action_dim)
 
     def _fit_normalizer(self) -> None:
