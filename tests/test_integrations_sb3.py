@@ -324,3 +324,37 @@ def test_nan_rewards_are_refused(bad):
     with pytest.raises(ValueError, match=r"NaN or inf.*episode of 3 steps"):
         _episode(buffer, 3)
     assert buffer.ready_count == 0 and not buffer.ready.any()
+
+
+def test_an_episode_abandoned_by_a_reset_is_not_glued_onto_the_next():
+    """A second learn() resets the envs mid-episode: the next episode is rewarded on its own
+    steps, and the abandoned ones stay unready."""
+    seen = []
+
+    def reward(observations):
+        seen.append(observations[:, 0].copy())
+        return np.zeros(len(observations) - 1)
+
+    space = gym.spaces.Box(-np.inf, np.inf, (3,), np.float32)
+    act = gym.spaces.Box(-1, 1, (2,), np.float32)
+    buffer = OTReplayBuffer(50, space, act, reward=reward)
+    for t in range(3):  # abandoned after 3 steps
+        _add(buffer, np.full(3, float(t)), np.full(3, t + 1.0), False)
+    for t in range(5):  # the reset's episode: it does not start where the last step ended
+        _add(buffer, np.full(3, 100.0 + t), np.full(3, 101.0 + t), t == 4)
+    np.testing.assert_array_equal(seen[0], [100, 101, 102, 103, 104, 105])
+    assert buffer.ready_count == buffer.ready.sum() == 5 and not buffer.ready[:3].any()
+
+
+def test_reset_empties_the_ready_rows_too():
+    """SB3's reset() left them counted: sampling then redrew unready rows forever."""
+    space = gym.spaces.Box(-1, 1, (3,), np.float32)
+    act = gym.spaces.Box(-1, 1, (2,), np.float32)
+    buffer = OTReplayBuffer(10, space, act, reward=episode_reward)
+    _episode(buffer, 5)
+    assert buffer.ready_count == 5
+    buffer.reset()
+    _add(buffer, np.zeros(3), np.ones(3), False)
+    assert buffer.ready_count == 0 and buffer.episode_steps.tolist() == [1]
+    with pytest.raises(ValueError, match="no episode has ended yet"):
+        buffer.sample(4)

@@ -131,6 +131,7 @@ class OTReplayBuffer(ReplayBuffer):
         infos: list[dict[str, Any]],
     ) -> None:
         row = self.pos
+        self._drop_abandoned_episodes(obs)
         self.ready_count -= int(self.ready[row].sum())
         self.ready[row] = False  # a row written again belongs to a new, running episode
         super().add(obs, next_obs, action, np.zeros_like(reward), done, infos)
@@ -138,6 +139,29 @@ class OTReplayBuffer(ReplayBuffer):
         for env in np.flatnonzero(np.asarray(done).reshape(-1)):
             self._label_episode(int(env), row)
             self.episode_steps[env] = 0
+
+    def _drop_abandoned_episodes(self, obs: np.ndarray) -> None:
+        """Forget a running episode that this step does not continue: a second ``learn()``
+        resets the envs mid-episode, and its next episode would be glued onto the abandoned
+        rows (rewarded as one episode, a jump between unrelated states coupled as a
+        transition). The abandoned rows stay unready until overwritten."""
+        if not self.episode_steps.any():
+            return
+        stored = np.asarray(obs, dtype=self.observations.dtype).reshape(self.n_envs, -1)
+        previous = self.next_observations[(self.pos - 1) % self.buffer_size].reshape(
+            self.n_envs, -1
+        )
+        same = stored == previous
+        if not same.all():  # NaN == NaN counts as the same observation
+            same |= np.isnan(stored) & np.isnan(previous)
+        self.episode_steps[~same.all(axis=1)] = 0
+
+    def reset(self) -> None:
+        """Empty the buffer (SB3's reset), its ready rows and running episodes with it."""
+        super().reset()
+        self.ready[:] = False
+        self.ready_count = 0
+        self.episode_steps[:] = 0
 
     def _label_episode(self, env: int, last_row: int) -> None:
         steps = int(min(self.episode_steps[env], self.buffer_size))  # longer: its start is gone

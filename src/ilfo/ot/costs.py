@@ -99,10 +99,12 @@ def _cost_matrix_jax(x, y, metric: str):
     if x.ndim != 2 or y.ndim != 2 or x.shape[1] != y.shape[1]:
         raise ValueError(f"points must be (n, d) and (m, d), got {x.shape} and {y.shape}")
     if metric == "cosine":
-        nx = jnp.linalg.norm(x, axis=1, keepdims=True)
-        ny = jnp.linalg.norm(y, axis=1, keepdims=True)
-        safe_nx = jnp.where(nx > 0, nx, 1.0)
-        safe_ny = jnp.where(ny > 0, ny, 1.0)
+        # The norm's gradient at 0 is NaN, which a where after it does not stop: mask the
+        # squared norm instead (a zero vector's norm is taken as 1: cost 1 to everything).
+        sx = jnp.sum(x * x, axis=1, keepdims=True)
+        sy = jnp.sum(y * y, axis=1, keepdims=True)
+        safe_nx = jnp.sqrt(jnp.where(sx > 0, sx, 1.0))
+        safe_ny = jnp.sqrt(jnp.where(sy > 0, sy, 1.0))
         return jnp.clip(1.0 - (x / safe_nx) @ (y / safe_ny).T, 0.0, 2.0)
     # Differences rather than the product expansion: exact at zero, and differentiable there.
     diff = x[:, None, :] - y[None, :, :]
