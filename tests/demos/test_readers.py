@@ -509,3 +509,16 @@ def test_minari_refusals(tmp_path):
     eps[0]["observations"] = {"text": np.array([b"a"] * 6)}
     with pytest.raises(ValueError, match="not numbers"):
         demos.load_any(_write_minari(tmp_path / "t", eps))
+
+
+def test_d4rl_without_timeouts_warns_of_joined_time_limit_ends(tmp_path):
+    """Older files flag terminals only: an episode that ended at the time limit runs into the
+    next. With next observations the joins are counted; without, the warning is general."""
+    episodes = _episodes()
+    path = _write_d4rl(tmp_path / "d.hdf5", episodes, flags=("terminals",))  # odd ones unflagged
+    with pytest.warns(UserWarning, match=r"no 'timeouts', and at 1 unflagged rows"):
+        got = demos.read_d4rl(path)
+    assert len(got.episodes) == len(episodes) - 1  # the second ran into the third
+    bare = _write_d4rl(tmp_path / "bare.hdf5", episodes, next_obs=False, flags=("terminals",))
+    with pytest.warns(UserWarning, match="cut at terminals only"):
+        demos.read_d4rl(bare)

@@ -46,6 +46,7 @@ from __future__ import annotations
 import itertools
 import json
 import re
+import warnings
 import zipfile
 import zlib
 from collections.abc import Callable
@@ -365,6 +366,8 @@ def read_d4rl(path: str | Path) -> DemoFile:
                 raise ValueError(f"{path}: {key!r} must be 1-D, got shape {data[key].shape}")
             done |= data[key] != 0
     unfinished = not done[-1]
+    if "timeouts" not in data:
+        _warn_unflagged_time_limits(path, obs, next_obs, done)
     extras = {k: data[k] for k in ("actions", "rewards") if k in data}
     episodes = []
     spans = d4rl_spans(done, next_obs is not None)
@@ -385,6 +388,30 @@ def read_d4rl(path: str | Path) -> DemoFile:
     if dropped:
         provenance["dropped_one_step_episodes"] = dropped
     return DemoFile(episodes=checked_episodes(episodes, path), env_id="", provenance=provenance)
+
+
+def _warn_unflagged_time_limits(
+    path: Path, obs: np.ndarray, next_obs: np.ndarray | None, done: np.ndarray
+) -> None:
+    """A D4RL file with terminals but no timeouts (older -v0 files) joins an episode that
+    ended at the time limit to the next one: say so, counting the joins where the file's next
+    observations show them (D4RL's own loader cuts such files by max_episode_steps)."""
+    if next_obs is None:
+        warnings.warn(
+            f"{path} has 'terminals' but no 'timeouts': episodes are cut at terminals only, so "
+            "any that ended at the time limit are joined to the next one",
+            stacklevel=3,
+        )
+        return
+    continuous = (next_obs[:-1] == obs[1:]).all(axis=1) | done[:-1]
+    joins = int((~continuous).sum())
+    if joins:
+        warnings.warn(
+            f"{path} has 'terminals' but no 'timeouts', and at {joins} unflagged rows the next "
+            "observation is not the next row's: likely episodes that ended at the time limit, "
+            "joined here to the next one",
+            stacklevel=3,
+        )
 
 
 def d4rl_spans(done: np.ndarray, has_next_observations: bool) -> list[tuple[int, int, int]]:
