@@ -1,3 +1,4 @@
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -26,6 +27,20 @@ def test_fixed_horizon_ignores_termination_and_records_it():
     steps, terminated, truncated, flags = _run(make_env("Hopper-v5", True, horizon=300), 0)
     assert steps == 300 and truncated and not terminated
     assert any(flags)  # random actions make Hopper fall: the fall is recorded, not obeyed
+
+
+def test_fixed_horizon_ignores_termination_under_render_wrappers_too():
+    """gym.make puts "rgb_array_list"'s RenderCollection outside its own TimeLimit, where the
+    termination was once left in force; built only (rendering needs a display library)."""
+    from ilfo.envs.wrappers import IgnoreTermination
+
+    env = make_env("Hopper-v5", True, horizon=300, render_mode="rgb_array_list")
+    chain = []
+    while isinstance(env, gym.Wrapper):
+        chain.append(type(env))
+        env = env.env
+    assert chain[:2] == [gym.wrappers.TimeLimit, IgnoreTermination]
+    assert chain.count(gym.wrappers.TimeLimit) == 1 and gym.wrappers.RenderCollection in chain
 
 
 def test_standard_mode_stops_at_termination():

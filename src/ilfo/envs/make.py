@@ -107,13 +107,15 @@ def make_env(
             )
         kwargs["include_cfrc_ext_in_observation"] = False
     try:
-        env = gym.make(env_id, max_episode_steps=limit, render_mode=render_mode, **kwargs)
+        # Fixed horizon: no TimeLimit from gym.make (-1), whose render wrappers ("human",
+        # "rgb_array_list") would sit outside it; the horizon's own goes outside them below.
+        steps = -1 if fixed_horizon else limit
+        env = gym.make(env_id, max_episode_steps=steps, render_mode=render_mode, **kwargs)
     except gym.error.DependencyNotInstalled as err:
         raise ValueError(f"{env_id} needs an optional dependency: {err}") from err
     if fixed_horizon:
-        # Outside TimeLimit, so that the time limit still truncates at `limit`.
-        env = IgnoreTermination(env.env) if isinstance(env, gym.wrappers.TimeLimit) else env
-        env = gym.wrappers.TimeLimit(env, max_episode_steps=limit)
+        # Inside TimeLimit, so that the time limit still truncates at `limit`.
+        env = gym.wrappers.TimeLimit(IgnoreTermination(env), max_episode_steps=limit)
     if seed is not None:
         env.reset(seed=seed)
         env.action_space.seed(seed)
