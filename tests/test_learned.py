@@ -182,3 +182,24 @@ def test_expert_transitions_checks_its_demos_clearly():
         expert_transitions([demo, np.zeros((5, 4))])
     with pytest.raises(ValueError, match="at least one"):
         expert_transitions(np.zeros((0, 4, 3)))
+
+
+def test_learned_rewards_see_the_demos_up_to_the_horizon(tmp_path, monkeypatch):
+    """With --horizon 100 below the demos' length, the discriminator's expert transitions and
+    the agent's expert observations are each demo's first 100 (time features in [0, 1])."""
+    import ilfo.training.build as build
+    from ilfo.training import TrainConfig
+
+    seen = {}
+
+    def capture(**kwargs):
+        seen.update(kwargs)
+        return LearnedRewardSetup(**kwargs)
+
+    monkeypatch.setattr(build, "LearnedRewardSetup", capture)
+    config = TrainConfig(**{**TINY, **GAIFO, "num_demos": 2})
+    trainer = Trainer(config, tmp_path / "run", progress=False)
+    assert all(len(d) > 101 for d in trainer.demos)  # longer than the horizon
+    assert seen["expert_agent_obs"].shape[0] == len(seen["expert"].obs) == 2 * 100
+    times = np.asarray(seen["expert_agent_obs"][:, -1])
+    assert times.min() > 0 and times.max() <= 1

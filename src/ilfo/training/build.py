@@ -219,6 +219,10 @@ def make_agent(config: TrainConfig, env: EnvInfo, demos: Sequence[np.ndarray] | 
         demos = [np.zeros((env.horizon + 1, env.obs_dim), np.float32)] * max(
             1, -(-reward.batch_size // env.horizon)
         )
+    # What the learner can visit: a demo's first `horizon` transitions (with --horizon below
+    # the demos' length, its later ones would train the discriminator on states out of reach
+    # and give the time feature negative values).
+    demos = [d[: env.horizon + 1] for d in demos]
     setup = LearnedRewardSetup(
         reward=reward,
         schedule=schedule,
