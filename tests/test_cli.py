@@ -54,6 +54,11 @@ def test_reward_scores_ant_demos_without_contact_forces_by_default(capsys, tmp_p
         distances[tuple(flag)] = json.loads(capsys.readouterr().out)["ot_distance"]
     assert distances[()] == distances[("--no-contact-forces",)] < 1e-3
     assert distances[("--contact-forces",)] > 1.0
+    # A file already without them (27 columns) is scored as it is, not cut again.
+    narrow = tmp_path / "ant27.npz"
+    demos.save(narrow, [demos.Episode(body), demos.Episode(body + 1.0)], "Ant-v5")
+    assert main(["reward", "--json", "--demos", str(narrow), "--learners", "1"]) == 0
+    assert json.loads(capsys.readouterr().out)["ot_distance"] > 1.0
 
     assert main(["reward", "--no-contact-forces"]) == 2  # Hopper has none
     assert "applies to" in capsys.readouterr().err

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from ilfo import demos
-from ilfo.envs import CONTACT_FORCE_DIMS, drop_contact_forces
+from ilfo.envs import CONTACT_FORCE_DIMS, FULL_OBSERVATION_DIMS, match_observation_width
 from ilfo.paths import bundled_demos
 from ilfo.rewards import OOPS, PWIL, OOPSConfig
 from ilfo.training.config import default_contact_forces
@@ -80,8 +80,9 @@ def _run_reward(args: argparse.Namespace) -> int:
     data = demos.load(path)
     episodes = [e.observations for e in data.episodes]
     dropped = _drops_contact_forces(data.env_id, args.contact_forces)
-    if dropped:
-        episodes = [drop_contact_forces(obs, data.env_id) for obs in episodes]
+    if dropped:  # a file already without them is left as it is
+        width = FULL_OBSERVATION_DIMS[data.env_id] - CONTACT_FORCE_DIMS[data.env_id]
+        episodes = [match_observation_width(obs, data.env_id, width) for obs in episodes]
     if not 0 <= args.expert < len(episodes):
         raise ValueError(f"--expert {args.expert} out of range: the file has {len(episodes)}")
     expert = episodes[args.expert]

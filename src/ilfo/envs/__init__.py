@@ -4,6 +4,7 @@ the fixed-horizon protocol as plain gymnasium wrappers (``wrappers``) for any RL
 from ilfo.envs.bullet import BULLET_ENVS
 from ilfo.envs.make import (
     CONTACT_FORCE_DIMS,
+    FULL_OBSERVATION_DIMS,
     HEALTHY_ANGLE_ENVS,
     SUPPORTED_ENVS,
     drop_contact_forces,
@@ -22,6 +23,7 @@ from ilfo.envs.wrappers import (
 __all__ = [
     "BULLET_ENVS",
     "CONTACT_FORCE_DIMS",
+    "FULL_OBSERVATION_DIMS",
     "HEALTHY_ANGLE_ENVS",
     "SUPPORTED_ENVS",
     "FixedHorizonScore",

@@ -40,6 +40,9 @@ CONTACT_FORCE_DIMS: dict[str, int] = {"Ant-v5": 78, "Humanoid-v5": 78}
 """Envs whose observations end with the bodies' external contact forces (``cfrc_ext``, 13 bodies
 x 6), and how many columns those are. The paper's v2 versions of these tasks carried them as
 zeros (mujoco-py >= 2.0 left them unfilled); ``make_env(..., contact_forces=False)`` drops them."""
+FULL_OBSERVATION_DIMS: dict[str, int] = {"Ant-v5": 105, "Humanoid-v5": 348}
+"""The full observation width of the envs in ``CONTACT_FORCE_DIMS`` (gymnasium's defaults,
+the contact forces included)."""
 
 
 def env_spec(env_id: str) -> gym.envs.registration.EnvSpec:
@@ -135,16 +138,19 @@ def drop_contact_forces(observations: np.ndarray, env_id: str) -> np.ndarray:
 
     Raises:
         ValueError: ``env_id`` has no contact forces in its observations, or ``observations``
-            are too narrow to hold them.
+            are not its full observation (``FULL_OBSERVATION_DIMS``).
     """
     if env_id not in CONTACT_FORCE_DIMS:
         raise ValueError(f"{env_id} has no contact forces in its observations")
     observations = np.asarray(observations)
-    kept = observations.shape[-1] - CONTACT_FORCE_DIMS[env_id]
-    if kept < 1:
+    full, kept = (
+        FULL_OBSERVATION_DIMS[env_id],
+        FULL_OBSERVATION_DIMS[env_id] - CONTACT_FORCE_DIMS[env_id],
+    )
+    if observations.shape[-1] != full:  # else other columns would be cut in their place
         raise ValueError(
-            f"observations of dimension {observations.shape[-1]} cannot hold {env_id}'s "
-            f"{CONTACT_FORCE_DIMS[env_id]} contact-force columns"
+            f"observations of dimension {observations.shape[-1]} are not {env_id}'s full "
+            f"observation ({full} columns, {kept} without its contact forces)"
         )
     return observations[..., :kept]
 
