@@ -98,3 +98,20 @@ def test_a_bad_flag_is_not_buried_under_the_full_usage(capsys, tmp_path):
     with pytest.raises(SystemExit):  # a short usage is shown as it is
         main(["demos", "info"])
     assert capsys.readouterr().err.startswith("usage: ilfo demos info [-h] [--json] file")
+
+
+def test_a_missing_optional_dependency_is_a_one_line_error(monkeypatch, capsys):
+    def needs_pybullet(args):
+        raise ImportError('PyBullet is not installed: pip install -e ".[bullet]"')
+
+    monkeypatch.setattr("ilfo.cli.data._run_reward", needs_pybullet)
+    assert main(["reward"]) == 1
+    err = capsys.readouterr().err
+    assert err == 'ilfo: error: PyBullet is not installed: pip install -e ".[bullet]"\n'
+
+
+def test_demos_collect_refuses_a_negative_seed(tmp_path, capsys):
+    out = tmp_path / "d.npz"
+    args = ["demos", "collect", "--expert", "Hopper-v5", "-n", "1", "--seed", "-1"]
+    assert main([*args, "--out", str(out)]) == 2
+    assert "seeds must be >= 0, got -1" in capsys.readouterr().err and not out.exists()

@@ -252,11 +252,13 @@ def collect_demos(
     does.
 
     Raises:
-        ValueError: ``num_episodes`` < 1, or fewer than ``num_episodes`` episodes without a fall in
-            ``3 * num_episodes`` seeds (nothing is written).
+        ValueError: ``num_episodes`` < 1, ``first_seed`` < 0, or fewer than ``num_episodes``
+            episodes without a fall in ``3 * num_episodes`` seeds (nothing is written).
     """
     if num_episodes < 1:
         raise ValueError(f"need at least one episode, got {num_episodes}")
+    if first_seed < 0:
+        raise ValueError(f"seeds must be >= 0, got {first_seed}")
     episodes, seeds, skipped, kept_falls = [], [], [], []
     seed, last_seed = first_seed, first_seed + 3 * num_episodes
     while len(episodes) < num_episodes:

@@ -59,6 +59,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, FileNotFoundError) as err:
         print(f"ilfo: error: {err}", file=sys.stderr)
         return 2
+    except ImportError as err:  # an optional dependency missing (PyBullet, h5py, Ray, ...)
+        print(f"ilfo: error: {err}", file=sys.stderr)
+        return 1
     except OSError as err:  # a read-only or full disk, a path under a file: what and where
         where = f"{err.filename}: " if err.filename else ""
         print(f"ilfo: error: {where}{err.strerror or err}", file=sys.stderr)
