@@ -87,6 +87,19 @@ def test_resume_after_a_crash_drops_rows_logged_after_the_checkpoint(tmp_path):
     assert _metrics(trainer.train()) == full
 
 
+def test_eval_of_the_final_policy_repeats_the_last_evaluation(tmp_path):
+    """`ilfo eval` rolls out on the run's evaluation seeds, not the demos' (0, 1, ...): a
+    finished run's final policy scores what its last evaluation (at its last step) logged."""
+    from ilfo.evaluate import evaluate_run
+
+    run = _train(tmp_path, "run", steps=400)
+    last = [r for r in _metrics(run) if r["eval_score"]][-1]
+    assert last["step"] == "400"
+    result = evaluate_run(run, episodes=1)
+    assert round(result["score_mean"], 3) == float(last["eval_score"])
+    assert round(result["ot_distance"], 5) == float(last["eval_ot_distance"])
+
+
 def test_a_run_past_its_budget_resumes_and_an_extended_one_drops_its_old_final_policy(tmp_path):
     """Whole 100-step episodes take a 250-step run to 300: resuming it is no shortening (it
     only writes its final policy again); extending it removes the 300-step final policy, which

@@ -8,12 +8,14 @@ from typing import Any
 import numpy as np
 
 from ilfo.training import load_demo_set, load_run_policy, score_policy
+from ilfo.training.rollout import evaluation_seeds
 
 
 def evaluate_run(
     run_dir: Path, episodes: int = 10, video: str | None = None, best: bool = False
 ) -> dict[str, Any]:
-    """Run deterministic fixed-horizon episodes of a run's policy and summarise them.
+    """Run deterministic fixed-horizon episodes of a run's policy and summarise them, on the
+    run's evaluation seeds (``rollout.evaluation_seeds``: not the demos').
 
     The policy: ``policy.msgpack`` if the run finished, else its newest checkpoint's; with
     ``best``, ``best_policy.msgpack`` (``training.load_run_policy``).
@@ -31,7 +33,7 @@ def evaluate_run(
         run.agent,
         run.policy,
         horizon,
-        list(range(episodes)),
+        evaluation_seeds(config.seed, episodes),
         demos.distance_probe,
         render_first=bool(video),
     )

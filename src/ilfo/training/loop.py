@@ -45,6 +45,7 @@ from ilfo.training.rollout import (
     agent_observation,
     agent_observations,
     env_action,
+    evaluation_seeds,
     rollout_policy,
     score_policy,
 )
@@ -480,7 +481,7 @@ class Trainer:
     # ------------------------------------------------------------------------ evaluation
     def evaluate(self) -> dict[str, float]:
         """Deterministic fixed-horizon episodes: both scores, normalised, and OT distance."""
-        seeds = [10_000_019 * (self.config.seed + 1) + k for k in range(self.config.eval_episodes)]
+        seeds = evaluation_seeds(self.config.seed, self.config.eval_episodes)
         scored = score_policy(
             self.eval_env, self.agent, self.state, self.horizon, seeds, self.distance_probe
         )

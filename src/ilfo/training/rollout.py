@@ -124,6 +124,13 @@ class PolicyScores(NamedTuple):
     """Rendered frames of the first episode, if asked for."""
 
 
+def evaluation_seeds(run_seed: int, episodes: int) -> list[int]:
+    """The seeds of a run's evaluation episodes: the same at every evaluation (a curve compares
+    policies, not starts), apart from the training episodes' and the demos' (0, 1, ...), and
+    what ``ilfo eval`` uses, so that it scores a final policy as its last evaluation did."""
+    return [10_000_019 * (run_seed + 1) + k for k in range(episodes)]
+
+
 def score_policy(
     env: Any,
     agent: Agent,
