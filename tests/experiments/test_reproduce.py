@@ -196,3 +196,23 @@ def test_calibration_correlations_are_nan_without_warning_when_undefined():
             assert np.isnan(spearman(points))
             assert np.isnan(pearson(points))
         assert spearman(varied) == pytest.approx(1.0)
+
+
+def test_reproduce_exits_1_and_names_the_runs_given_up(tmp_path, capsys, monkeypatch):
+    """The report leaves out runs that failed past their retries: the command says so and
+    fails (it exited 0)."""
+    from ilfo.experiments import create_sweep, record_attempt
+
+    def reproduce(name, budget, root, factory, on_change=None):
+        the_plan = plan(name, budget)
+        for sub, spec in the_plan.sweeps.items():
+            sweep = create_sweep(root / sub, spec)
+        for _ in range(spec.retries + 1):
+            record_attempt(sweep, sweep.runs[0].name, "end", status="error", error="boom")
+        return the_plan, [root / "report" / "report.md"]
+
+    monkeypatch.setattr("ilfo.experiments.reproduce.reproduce", reproduce)
+    args = ["reproduce", "table1", "--budget", "smoke", "--dir", str(tmp_path), "--no-progress"]
+    assert main(args) == 1
+    out = capsys.readouterr().out
+    assert "failed: " in out and ": boom (log: " in out and "--retry-failed" in out

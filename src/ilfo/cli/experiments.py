@@ -366,6 +366,7 @@ def _add_reproduce_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _run_reproduce(args: argparse.Namespace) -> int:
+    from ilfo.experiments import open_sweep
     from ilfo.experiments.reproduce import plan, reproduce
 
     the_plan = plan(args.name, args.budget)
@@ -381,4 +382,18 @@ def _run_reproduce(args: argparse.Namespace) -> int:
     finally:
         display.close()
     print(f"report: {written[0]}")
-    return 0
+    # Runs given up after their retries are left out of the report: the command failed.
+    failed = [
+        (sweep, status)
+        for sweep in (open_sweep(root / sub) for sub in the_plan.sweeps)
+        for status in sweep.statuses()
+        if status.state == "failed"
+    ]
+    for sweep, status in failed:
+        print(f"failed: {status.name}: {status.error} (log: {sweep.log_file(status.name)})")
+    if failed:
+        print(
+            "retry them with `ilfo sweep run DIR --retry-failed` on their sweep directories, "
+            "then run this command again for the report"
+        )
+    return 1 if failed else 0
