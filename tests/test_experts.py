@@ -111,6 +111,9 @@ def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     assert "--gamma cannot change on --resume" in capsys.readouterr().err
     assert main([*base, "--resume", "--no-contact-forces"]) == 2
     assert "--contact-forces cannot change on --resume" in capsys.readouterr().err
+    for flag in ("--eval-every", "--eval-episodes", "--checkpoint-every"):  # were ignored
+        assert main([*base, "--resume", flag, "5"]) == 2
+        assert f"{flag} cannot change on --resume" in capsys.readouterr().err
     assert main([*base[:-2], str(tmp_path / "cf"), "--no-progress", "--no-contact-forces"]) == 2
     assert "--no-contact-forces applies to Ant-v5, Humanoid-v5, not Hopper-v5" in (
         capsys.readouterr().err

@@ -32,14 +32,15 @@ def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
     t.add_argument(
         "--eval-every",
         type=int,
-        default=10_000,
+        default=None,
         help="steps between evaluations (default 10,000; a resumed run keeps its own)",
     )
     t.add_argument(
         "--eval-episodes",
         type=int,
-        default=10,
-        help="episodes per evaluation (default 10; fewer for slow envs such as Minitaur)",
+        default=None,
+        help="episodes per evaluation (default 10; fewer for slow envs such as Minitaur; a "
+        "resumed run keeps its own)",
     )
     t.add_argument(
         "--reward-scale",
@@ -80,8 +81,8 @@ def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
     t.add_argument(
         "--checkpoint-every",
         type=int,
-        default=25_000,
-        help="steps between checkpoints (default 25,000)",
+        default=None,
+        help="steps between checkpoints (default 25,000; a resumed run keeps its own)",
     )
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
     t.set_defaults(run=_run_expert_train)
@@ -122,16 +123,18 @@ def _run_expert_train(args: argparse.Namespace) -> int:
 
     run_dir = Path(args.run_dir or Path("runs") / "experts" / f"{args.env}__sac__{args.seed}")
     if args.resume:
-        if args.reward_scale is not None:
-            raise ValueError("--reward-scale cannot change on --resume: the run keeps its own")
-        if args.healthy_angle_range is not None:
-            raise ValueError(
-                "--healthy-angle-range cannot change on --resume: the run keeps its own"
-            )
-        if args.gamma is not None:
-            raise ValueError("--gamma cannot change on --resume: the run keeps its own")
-        if args.contact_forces is not None:
-            raise ValueError("--contact-forces cannot change on --resume: the run keeps its own")
+        kept = {
+            "--reward-scale": args.reward_scale,
+            "--healthy-angle-range": args.healthy_angle_range,
+            "--gamma": args.gamma,
+            "--contact-forces": args.contact_forces,
+            "--eval-every": args.eval_every,
+            "--eval-episodes": args.eval_episodes,
+            "--checkpoint-every": args.checkpoint_every,
+        }
+        for flag, value in kept.items():
+            if value is not None:
+                raise ValueError(f"{flag} cannot change on --resume: the run keeps its own")
         recorded = read_run_config(run_dir).get("env")
         if recorded != args.env:
             raise ValueError(f"{run_dir} trains an expert for {recorded}, not {args.env}")
@@ -154,9 +157,9 @@ def _run_expert_train(args: argparse.Namespace) -> int:
             contact_forces=args.contact_forces,
             seed=args.seed,
             steps=1_000_000 if args.steps is None else args.steps,
-            eval_every=args.eval_every,
-            eval_episodes=args.eval_episodes,
-            checkpoint_every=args.checkpoint_every,
+            eval_every=10_000 if args.eval_every is None else args.eval_every,
+            eval_episodes=10 if args.eval_episodes is None else args.eval_episodes,
+            checkpoint_every=25_000 if args.checkpoint_every is None else args.checkpoint_every,
         )
         trainer = Trainer(config, run_dir, progress=not args.no_progress)
     trainer.resume_command = (
