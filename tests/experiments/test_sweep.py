@@ -470,6 +470,11 @@ def test_cli_dry_run_shows_what_only_and_skip_leave_out(tmp_path, capsys):
     for flag in ("--workers", "--cores-per-run"):
         assert main(["sweep", "run", str(fresh), *axes, flag, "0"]) != 0
         assert not fresh.exists()
+        assert main(["sweep", "run", str(fresh), *axes, "--backend", "ray", flag, "0"]) != 0
+        assert not fresh.exists()
+    cluster = ["--backend", "ray", "--address", "auto", "--workers", "2"]  # its CPUs decide
+    assert main(["sweep", "run", str(fresh), *axes, *cluster]) == 2
+    assert "a cluster (--address) runs as many as its CPUs hold" in capsys.readouterr().err
 
 
 def test_cli_dry_run_on_an_existing_sweep_checks_the_spec_as_the_run_would(tmp_path, capsys):

@@ -319,7 +319,8 @@ def _add_backend_arguments(p: argparse.ArgumentParser) -> None:
         "--workers",
         type=int,
         default=None,
-        help="local backend: runs at once (default: cores / --cores-per-run)",
+        help="runs at once (default: cores / --cores-per-run); with --backend ray, the size "
+        "of a local Ray instance",
     )
     p.add_argument(
         "--address",
@@ -333,7 +334,15 @@ def _backend_factory(args: argparse.Namespace) -> Any:
     from ilfo.experiments import LocalBackend, RayBackend
 
     if args.backend == "ray":
-        return lambda: RayBackend(args.address, cores_per_run=args.cores_per_run)
+        if args.cores_per_run < 1:  # before any sweep directory is made
+            raise ValueError(f"--cores-per-run must be >= 1, got {args.cores_per_run}")
+        if args.workers is not None and (args.workers < 1 or args.address is not None):
+            raise ValueError(
+                "--workers with --backend ray sizes a local Ray instance (>= 1); a cluster "
+                "(--address) runs as many as its CPUs hold"
+            )
+        num_cpus = None if args.workers is None else args.workers * args.cores_per_run
+        return lambda: RayBackend(args.address, cores_per_run=args.cores_per_run, num_cpus=num_cpus)
     if args.address is not None:
         raise ValueError("--address is for --backend ray")
     LocalBackend(args.cores_per_run, args.workers)  # bad numbers fail before any run starts
