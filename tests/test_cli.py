@@ -18,6 +18,17 @@ def test_reward_demo_on_bundled_data_ranks_learners(capsys):
     assert noisy < same_policy < random_policy
 
 
+def test_reward_on_a_two_episode_file_scores_the_other_episode_once(capsys, tmp_path):
+    from ilfo import demos
+
+    rng = np.random.default_rng(0)
+    path = tmp_path / "two.npz"
+    demos.save(path, [demos.Episode(rng.normal(size=(11, 11))) for _ in range(2)], "Hopper-v5")
+    assert main(["reward", "--json", "--demos", str(path)]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [r["learner"] for r in rows] == ["expert + N(0, 0.01^2) noise", "episode 1"]
+
+
 def test_reward_with_every_solver_and_pwil(capsys):
     for extra in (["--solver", "emd"], ["--solver", "greedy"], ["--rewarder", "pwil"]):
         assert main(["reward", "--json", "--learners", "1", *extra]) == 0

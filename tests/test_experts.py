@@ -1,5 +1,6 @@
 import dataclasses
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -87,6 +88,12 @@ def test_export_load_collect_and_card(tiny_run, tmp_path):
     assert result["episodes"] == 2 and np.isfinite(result["return_mean"])
     latest = export_expert(tiny_run, tmp_path / "latest", which="latest")
     assert json.loads((latest / "expert.json").read_text())["exported"]["policy"] == "latest"
+    no_best = tmp_path / "no-best"
+    shutil.copytree(tiny_run, no_best)
+    (no_best / "best_policy.json").unlink()
+    with pytest.warns(UserWarning, match="exporting its latest checkpoint's policy"):
+        fallback = export_expert(no_best, tmp_path / "fallback")
+    assert json.loads((fallback / "expert.json").read_text())["exported"]["policy"] == "latest"
     assert json.loads((out / "expert.json").read_text())["exported"]["policy"] == "best"
 
 

@@ -16,6 +16,7 @@ import json
 import os
 import shutil
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -134,6 +135,12 @@ def export_expert(
         run = load_run_policy(run_dir, "best")
         chosen = {"policy": "best", **json.loads(best_info.read_text())}
     else:  # the newest checkpoint's policy, step and evaluation
+        if which == "best":
+            warnings.warn(
+                f"{run_dir} has no {BEST_POLICY_INFO} (no evaluation kept a best policy): "
+                "exporting its latest checkpoint's policy",
+                stacklevel=2,
+            )
         run = load_run_policy(run_dir, "latest")
         ckpt = run.checkpoint
         assert ckpt is not None  # "latest" reads a checkpoint
@@ -224,7 +231,10 @@ def load_expert(path: str | Path) -> ExpertPolicy:
         raise ValueError(f"{record_path} is not a readable expert record ({err})") from None
     config = config_from_dict(raw_config, record_path)
     env = make_env(config.env, True, horizon=horizon, contact_forces=config.observes_contact_forces)
-    agent = make_agent(config, env_info(env, config.env), demos=None)
+    try:  # only its shapes are needed; a PyBullet env holds a physics client until closed
+        agent = make_agent(config, env_info(env, config.env), demos=None)
+    finally:
+        env.close()
     template = policy_of(agent.functions.init(config.seed))
     policy = load_msgpack(template, path / POLICY_FILE, "expert policy")
     return ExpertPolicy(config, agent, policy, horizon)
@@ -393,7 +403,10 @@ def evaluate_expert(
         contact_forces=expert.config.observes_contact_forces,
     )
     seeds = [first_seed + k for k in range(episodes)]
-    scored = score_policy(env, expert.agent, expert.policy, expert.horizon, seeds)
+    try:
+        scored = score_policy(env, expert.agent, expert.policy, expert.horizon, seeds)
+    finally:
+        env.close()
     return {
         "env_id": expert.config.env,
         "episodes": episodes,

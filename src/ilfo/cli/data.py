@@ -25,8 +25,9 @@ def _add_reward_parser(sub: argparse._SubParsersAction) -> None:
         description=(
             "Compute per-step OT rewards of learner episodes against a demonstration and print "
             "one line per episode. By default: the bundled Hopper-v5 scripted rollouts, demo 0 "
-            "as the expert, and as learners another episode of the same policy, that demo plus "
-            "noise, and a random-action episode."
+            "as the expert, and as learners that demo plus noise and the file's second and last "
+            "episodes (in the bundled file: another episode of the same policy and a "
+            "random-action one)."
         ),
     )
     p.add_argument("--demos", default=None, help="demo .npz file (default: bundled Hopper-v5)")
@@ -91,9 +92,8 @@ def _run_reward(args: argparse.Namespace) -> int:
         noisy = expert + np.random.default_rng(0).normal(0.0, 0.01, expert.shape)
         others = [i for i in range(len(episodes)) if i != args.expert]
         learners.append(("expert + N(0, 0.01^2) noise", noisy))
-        if others:
-            learners.append((f"episode {others[0]}", episodes[others[0]]))
-            learners.append((f"episode {others[-1]}", episodes[others[-1]]))
+        for i in dict.fromkeys(others[:1] + others[-1:]):  # the first and last other, once
+            learners.append((f"episode {i}", episodes[i]))
     else:
         for i in args.learners:
             if not 0 <= i < len(episodes):
