@@ -194,9 +194,14 @@ def _run_sweep(args: argparse.Namespace) -> int:
         display.close()
     print(progress_line(final))
     failed = [s for s in final if s.state == "failed"]
+    _print_failed(sweep, failed)
+    return 1 if failed else 0
+
+
+def _print_failed(sweep: Any, failed: list[Any]) -> None:
+    """A line per run given up after its retries: its last error and its log."""
     for status in failed:
         print(f"failed: {status.name}: {status.error} (log: {sweep.log_file(status.name)})")
-    return 1 if failed else 0
 
 
 class _Progress:
@@ -392,14 +397,12 @@ def _run_reproduce(args: argparse.Namespace) -> int:
         display.close()
     print(f"report: {written[0]}")
     # Runs given up after their retries are left out of the report: the command failed.
-    failed = [
-        (sweep, status)
-        for sweep in (open_sweep(root / sub) for sub in the_plan.sweeps)
-        for status in sweep.statuses()
-        if status.state == "failed"
-    ]
-    for sweep, status in failed:
-        print(f"failed: {status.name}: {status.error} (log: {sweep.log_file(status.name)})")
+    failed = False
+    for sub in the_plan.sweeps:
+        sweep = open_sweep(root / sub)
+        given_up = [s for s in sweep.statuses() if s.state == "failed"]
+        _print_failed(sweep, given_up)
+        failed = failed or bool(given_up)
     if failed:
         print(
             "retry them with `ilfo sweep run DIR --retry-failed` on their sweep directories, "

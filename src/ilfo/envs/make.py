@@ -143,10 +143,8 @@ def drop_contact_forces(observations: np.ndarray, env_id: str) -> np.ndarray:
     if env_id not in CONTACT_FORCE_DIMS:
         raise ValueError(f"{env_id} has no contact forces in its observations")
     observations = np.asarray(observations)
-    full, kept = (
-        FULL_OBSERVATION_DIMS[env_id],
-        FULL_OBSERVATION_DIMS[env_id] - CONTACT_FORCE_DIMS[env_id],
-    )
+    full = FULL_OBSERVATION_DIMS[env_id]
+    kept = full - CONTACT_FORCE_DIMS[env_id]
     if observations.shape[-1] != full:  # else other columns would be cut in their place
         raise ValueError(
             f"observations of dimension {observations.shape[-1]} are not {env_id}'s full "

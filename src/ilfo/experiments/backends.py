@@ -34,7 +34,7 @@ from ilfo.experiments.sweep import (
 )
 from ilfo.experiments.worker import EXIT_BUSY, PARENT_SIGNAL_ENV, thread_environment
 
-EXIT_DONE, EXIT_FAILED, EXIT_INTERRUPTED = 0, 1, 130
+EXIT_INTERRUPTED = 130
 PROGRESS_SECONDS = 10.0
 """How often the running runs' steps are read for the progress display."""
 

@@ -120,8 +120,8 @@ def train_run(run_dir: os.PathLike[str] | str, config: Mapping[str, object]) -> 
         # The manifest's budget at least: a run cut short by hand (`ilfo train --resume --steps`)
         # would otherwise end below it at every start, never done, requeued forever.
         written = int(read_run_config(run_dir)["steps"])
-        newest = checkpoint_steps(run_dir)[-1][0] if checkpoint_steps(run_dir) else 0
-        budget = max(written, int(config["steps"]), newest)  # type: ignore[call-overload]
+        steps = [step for step, _ in checkpoint_steps(run_dir)]
+        budget = max(written, int(config["steps"]), *steps)  # type: ignore[call-overload]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # "no complete checkpoint yet": expected here
             trainer = Trainer.resume(

@@ -153,8 +153,9 @@ def load_demo_set(config: TrainConfig, obs_dim: int) -> DemoSet:
             f"{config.env} has {obs_dim}"
         )
     returns = [e.task_score for e in episodes if e.task_score is not None]
-    # NaN where none was recorded, or where they sum to 0 (nothing to divide a score by).
-    mean = float(np.mean(returns)) if returns and np.mean(returns) != 0 else math.nan
+    mean = float(np.mean(returns)) if returns else math.nan
+    if mean == 0:  # nothing to divide a score by
+        mean = math.nan
     path = demos_path(config)
     source = DemoSource(str(path.resolve()), file_sha256(path), len(episodes), mean)
     return DemoSet(observations, mean, OOPS(observations[:1]), source)
