@@ -428,6 +428,7 @@ def test_a_snapshot_leaves_the_buffer_out_and_resumes_after_refilling_it(tmp_pat
     assert ckpt.name == "step_000000400"
     assert not (ckpt / "replay.npz").exists() and (ckpt / "replay.omitted").is_file()
     assert not (out / "tb").exists() and (out / "metrics.csv").is_file()
+    assert (ckpt / "best_policy.msgpack").is_file()  # its own best, for a resume to put back
     assert (out / "demos.json").read_bytes() == (run / "demos.json").read_bytes()
     size = sum(f.stat().st_size for f in out.rglob("*") if f.is_file())
     run_size = sum(f.stat().st_size for f in run.rglob("*") if f.is_file())

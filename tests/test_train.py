@@ -3,6 +3,7 @@
 import csv
 import dataclasses
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -116,6 +117,42 @@ def test_a_run_past_its_budget_resumes_and_an_extended_one_drops_its_old_final_p
     assert not (run / "policy.msgpack").exists()
     extended.train()
     assert (run / "policy.msgpack").is_file()
+
+
+def _replace(path, data):  # as the loop writes its files: a new file renamed over the old
+    tmp = path.with_name(path.name + ".new")
+    tmp.write_bytes(data)
+    tmp.replace(path)
+
+
+def test_resume_puts_back_the_checkpoints_best_policy(tmp_path):
+    """A best policy written after the last checkpoint (by a later evaluation) is from a future
+    the resume discards: the checkpoint's copy goes back, so that the best policy's record
+    matches the metrics rows whatever the continuation does."""
+    run = _train(tmp_path, "run", steps=400)
+    young = shutil.copytree(run, tmp_path / "young")
+    ckpt = latest_checkpoint(run)
+    kept = {n: (ckpt / n).read_bytes() for n in ("best_policy.msgpack", "best_policy.json")}
+    assert kept["best_policy.json"] == (run / "best_policy.json").read_bytes()
+    future = {**json.loads(kept["best_policy.json"]), "step": 500, "eval_score": 1e9}
+    _replace(run / "best_policy.json", json.dumps(future).encode())
+    _replace(run / "best_policy.msgpack", b"a policy of a discarded future")
+    trainer = Trainer.resume(run, progress=False)
+    assert {n: (run / n).read_bytes() for n in kept} == kept
+    trainer._lock.release()
+    # A checkpoint of an earlier ilfo holds no copy: a newer best policy stays, with a warning.
+    for name in kept:
+        (ckpt / name).unlink()
+    _replace(run / "best_policy.json", json.dumps(future).encode())
+    with pytest.warns(UserWarning, match="from step 500, after checkpoint"):
+        Trainer.resume(run, progress=False)._lock.release()
+    assert json.loads((run / "best_policy.json").read_text())["step"] == 500
+    # A run killed before its first checkpoint starts again from 0, without its old best.
+    shutil.rmtree(young / "checkpoints")
+    with pytest.warns(UserWarning, match="starts again from step 0"):
+        Trainer.resume(young, progress=False)._lock.release()
+    assert not (young / "best_policy.json").exists()
+    assert not (young / "best_policy.msgpack").exists()
 
 
 @pytest.mark.parametrize("algo", ["oops-ddpg", "oops-sac", "pwil-td3", "td3"])

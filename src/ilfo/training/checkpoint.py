@@ -3,7 +3,8 @@
 A checkpoint is the directory ``checkpoints/step_N`` (N the environment steps done): the agent
 state (``agent.msgpack``), the replay buffer (``replay.npz``), the random-phase states kept
 for the normaliser (``random_states.npz``), the episode reward's state (``state.json``'s
-``reward_state`` and ``reward_arrays.npz``) and the counters (``state.json``, written last).
+``reward_state`` and ``reward_arrays.npz``), the best policy so far (``best_policy.msgpack`` and
+``best_policy.json``, where there is one) and the counters (``state.json``, written last).
 Every other source of randomness is derived from (seed, episode index), so a run resumed from
 a checkpoint reproduces the uninterrupted one exactly. It is written in ``.tmp_step_N`` and
 renamed once complete; older checkpoints are removed after, so a kill at any moment leaves at
@@ -15,6 +16,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,6 +28,8 @@ from ilfo.files import load_msgpack, load_npz
 from ilfo.replay import ReplayBuffer
 from ilfo.rewards import RewardState
 from ilfo.training.run_dir import (
+    BEST_POLICY_FILE,
+    BEST_POLICY_INFO,
     CHECKPOINTS_DIR,
     REPLAY_FILE,
     REPLAY_OMITTED,
@@ -81,6 +85,9 @@ def save_checkpoint(run_dir: Path, ckpt: Checkpoint) -> Path:
     reward = ckpt.reward_state
     if reward is not None and reward.arrays:
         np.savez(tmp / REWARD_ARRAYS_FILE, **reward.arrays)
+    for name in BEST_FILES:  # see restore_best_policy
+        if (Path(run_dir) / name).is_file():
+            _link_or_copy(Path(run_dir) / name, tmp / name)
     meta = {
         "schema": CHECKPOINT_SCHEMA,
         "step": ckpt.step,
@@ -98,6 +105,55 @@ def save_checkpoint(run_dir: Path, ckpt: Checkpoint) -> Path:
     for _, old in checkpoint_steps(run_dir)[:-1]:
         shutil.rmtree(old, ignore_errors=True)
     return final
+
+
+BEST_FILES = (BEST_POLICY_FILE, BEST_POLICY_INFO)
+
+
+def restore_best_policy(run_dir: Path, ckpt_dir: Path | None, best_eval: dict[str, float]) -> None:
+    """Put back the best policy that checkpoint ``ckpt_dir`` knows (``best_eval``, its record);
+    with no checkpoint (a run starting again from step 0), remove it.
+
+    An evaluation after the checkpoint may have written a better one. An exact continuation
+    writes it again; one that is not exact (from a snapshot, or on other hardware) would keep
+    a best policy from a future it discarded, at a step whose metrics row it rewrites.
+    Checkpoints written before ilfo kept the best policy in them have no copy: a best policy
+    newer than such a checkpoint is then left with a warning.
+    """
+    run_dir = Path(run_dir)
+    if ckpt_dir is not None and all((ckpt_dir / name).is_file() for name in BEST_FILES):
+        for name in BEST_FILES:
+            tmp = run_dir / f".{name}.tmp"
+            shutil.copyfile(ckpt_dir / name, tmp)
+            os.replace(tmp, run_dir / name)
+        return
+    info_path = run_dir / BEST_POLICY_INFO
+    if not info_path.is_file():
+        return
+    try:
+        best_step = int(json.loads(info_path.read_text(encoding="utf-8"))["step"])
+    except (ValueError, KeyError, TypeError) as err:
+        raise ValueError(f"{info_path} is not a readable best-policy record ({err})") from None
+    if not best_eval:  # no best policy yet at the checkpoint: the files came after it
+        for name in BEST_FILES:
+            (run_dir / name).unlink(missing_ok=True)
+    elif best_step != best_eval.get("step"):
+        warnings.warn(
+            f"{run_dir / BEST_POLICY_FILE} is from step {best_step}, after checkpoint "
+            f"{ckpt_dir}, which holds no copy of its own best (step "
+            f"{int(best_eval['step'])}; written by an earlier ilfo): it stays, though a "
+            "continuation that is not exact may not reach it again",
+            stacklevel=3,
+        )
+
+
+def _link_or_copy(src: Path, dst: Path) -> None:
+    """A hard link where the file system allows (the run replaces, never rewrites, its best
+    policy files, so the link keeps the checkpoint's version), else a copy."""
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copyfile(src, dst)
 
 
 def load_checkpoint(

@@ -37,7 +37,12 @@ from ilfo.training.build import (
     make_reward,
     network_normalizer,
 )
-from ilfo.training.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from ilfo.training.checkpoint import (
+    Checkpoint,
+    load_checkpoint,
+    restore_best_policy,
+    save_checkpoint,
+)
 from ilfo.training.config import TrainConfig, config_from_dict
 from ilfo.training.metrics import MetricsLog, truncate_metrics
 from ilfo.training.plots import plot_runs
@@ -541,9 +546,10 @@ class Trainer:
 
         Changes files only once the checkpoint has loaded: rows of metrics.csv logged after the
         checkpoint are dropped when training starts (they will be logged again, as
-        TensorBoard's are hidden), what a killed checkpoint write left is removed, and a new
-        ``steps`` is written to config.json. A run killed before its first checkpoint starts
-        again from step 0 (with a warning). The returned trainer owns the run directory
+        TensorBoard's are hidden), the best policy is the checkpoint's again
+        (``checkpoint.restore_best_policy``), what a killed checkpoint write left is removed,
+        and a new ``steps`` is written to config.json. A run killed before its first checkpoint
+        starts again from step 0 (with a warning). The returned trainer owns the run directory
         (``RunDirInUse`` if another process does) until its ``train`` returns.
         """
         run_dir = Path(run_dir)
@@ -573,6 +579,7 @@ class Trainer:
                     f"{steps} would shorten it; pass at least {trainer.step}"
                 )
             remove_incomplete_checkpoints(run_dir)
+            restore_best_policy(run_dir, checkpoint, trainer.best_eval)
             if trainer.step < config.steps:  # a final policy of a shorter budget is no longer
                 (run_dir / FINAL_POLICY_FILE).unlink(missing_ok=True)  # the run's final one
             if steps is not None:
