@@ -208,6 +208,8 @@ def test_demos_where_the_expert_falls_are_skipped_and_recorded(tiny_run, tmp_pat
     kept_provenance = demos.load(tmp_path / "k.npz").provenance
     assert len(kept_all) == 3 and kept_provenance["seeds"] == [10, 11, 12]
     assert kept_provenance["kept_seeds_with_a_fall"] == [11]  # kept, but the card must say so
+    with pytest.warns(UserWarning, match=r"seeds \(1000-1002\) reach the expert evaluations"):
+        collect_demos(expert, 2, tmp_path / "late.npz", first_seed=999)  # 999 skipped, a fall
 
 
 def test_a_finish_is_kept_at_full_length_and_scored_as_the_evaluation(

@@ -264,6 +264,8 @@ def collect_demos(
     Raises:
         ValueError: ``num_episodes`` < 1, ``first_seed`` < 0, or fewer than ``num_episodes``
             episodes without a fall in ``3 * num_episodes`` seeds (nothing is written).
+
+    Warns where the seeds reach ``EVAL_FIRST_SEED``, where the expert's card is evaluated.
     """
     if num_episodes < 1:
         raise ValueError(f"need at least one episode, got {num_episodes}")
@@ -299,6 +301,13 @@ def collect_demos(
             )
             seeds.append(seed)
         seed += 1
+    if seeds[-1] >= EVAL_FIRST_SEED:
+        warnings.warn(
+            f"the demos' seeds ({seeds[0]}-{seeds[-1]}) reach the expert evaluations' (from "
+            f"{EVAL_FIRST_SEED}): an expert card's return (`ilfo expert export`, `ilfo expert "
+            "eval`) is then measured partly on the demos' own starts",
+            stacklevel=2,
+        )
     demo_io.save(
         out,
         episodes,
