@@ -6,14 +6,20 @@ For each episode and each demo, OOPS's coupling of the episode's atoms (its tran
 default) with the demo's gives each step a transported cost c_t; the step's reward against
 that demo is ``squash(-c_t)``: ``oops`` (OOPS's own reward, -reward_scale * T / sqrt(d) * c_t,
 what ilfo's agents learn from), ``linear`` (alpha * -c_t) or ``exponential`` (alpha *
-exp(beta * -c_t), OTR's choice for locomotion, alpha = beta = 5). With several demos, the
-episode's rewards are the mean over the ``top_k`` demos whose rewards sum highest (OTR's
-aggregation; top_k 1: the best-matching demo). Episodes are independent: they are labelled in
-parallel over ``workers`` processes.
+exp(beta * -c_t), OTR's choice for locomotion, alpha = beta = 5). For these two, as in OTR,
+every step carries the mass 1/H of an ``episode_length`` H (default: the longest demo's), so
+c_t is the step's cost at that mass: an episode shorter than H is not penalised for its
+length (with uniform masses 1/T, every cost of a T-step episode would grow by H/T). With
+several demos, the episode's rewards are the mean over the ``top_k`` demos whose rewards sum
+highest (OTR's aggregation; top_k 1: the best-matching demo). Episodes are independent:
+they are labelled in parallel over ``workers`` processes.
 
 Formats (read by ``ilfo.demos.load_any``, written back in kind): ilfo ``.npz``, Minari HDF5
-datasets (a copy of the dataset directory, each ``episode_<i>/rewards`` replaced) and D4RL
-HDF5 files (a copy, ``rewards`` replaced row by row). A D4RL file without
+datasets (a copy of the dataset directory given, each ``episode_<i>/rewards`` replaced; given
+its HDF5 file alone, a copy of that file) and D4RL HDF5 files (a copy, ``rewards`` replaced
+row by row). Ant-v5 and Humanoid-v5 states are compared without the contact forces that end
+their observations, as ilfo's imitation observes them (``contact_forces``); the output keeps
+every column. A D4RL file without
 ``next_observations`` has no transition for the last row of each episode: that row gets the
 reward of the episode's last labelled step (and a one-row episode, none at all, 0).
 """
@@ -23,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import multiprocessing
 import os
+import re
 import shutil
 import time
 from collections.abc import Callable, Sequence
@@ -33,8 +40,10 @@ from typing import Any, Literal
 
 import numpy as np
 
+from ilfo.envs import CONTACT_FORCE_DIMS, FULL_OBSERVATION_DIMS, match_observation_width
 from ilfo.experiments.worker import THREAD_VARIABLES
 from ilfo.rewards import OOPS, OOPSConfig
+from ilfo.training.config import default_contact_forces
 
 Squashing = Literal["oops", "linear", "exponential"]
 
@@ -56,6 +65,9 @@ class LabelConfig:
     """Rate of the exponential squashing (OTR: 5)."""
     top_k: int = 1
     """Demos averaged: the k whose rewards of the episode sum highest (OTR's top-k)."""
+    episode_length: int | None = None
+    """H: the linear and exponential squashings see each step's cost at the mass 1/H, as OTR
+    (its ``episode_length``, 1000 on MuJoCo); None: the longest demo's transitions."""
 
     def __post_init__(self) -> None:
         if self.squashing not in ("oops", "linear", "exponential"):
@@ -64,9 +76,15 @@ class LabelConfig:
             )
         if isinstance(self.top_k, bool) or not isinstance(self.top_k, int) or self.top_k < 1:
             raise ValueError(f"top_k must be an integer >= 1, got {self.top_k!r}")
-        for name in ("alpha", "beta"):
-            if not np.isfinite(getattr(self, name)):
-                raise ValueError(f"{name} must be finite, got {getattr(self, name)!r}")
+        for name in ("alpha", "beta"):  # <= 0 would reward the episodes far from the demos
+            value = getattr(self, name)
+            if not np.isfinite(value) or value <= 0:
+                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+        length = self.episode_length
+        if length is not None and (isinstance(length, bool) or not isinstance(length, int)):
+            raise ValueError(f"episode_length must be an integer, got {length!r}")
+        if length is not None and length < 1:
+            raise ValueError(f"episode_length must be >= 1, got {length}")
 
 
 class EpisodeLabeller:
@@ -77,18 +95,21 @@ class EpisodeLabeller:
         if self.config.top_k > len(demos):
             raise ValueError(f"top_k {self.config.top_k} exceeds the {len(demos)} demos given")
         self.oops = OOPS(demos, dataclasses.replace(self.config.oops, warm_start=False))
+        self.episode_length = self.config.episode_length or max(len(d) - 1 for d in demos)
 
     def __call__(self, observations: np.ndarray) -> np.ndarray:
         cfg = self.config
         couplings = self.oops.couplings(observations)
-        costs = np.stack([c.row_costs for c in couplings])  # (demos, T)
+        costs = np.stack([c.row_costs for c in couplings])  # (demos, T), rows of mass 1/T
         if cfg.squashing == "oops":
             scale = cfg.oops.reward_scale * costs.shape[1] / np.sqrt(self.oops.obs_dim)
             rewards = -scale * costs
-        elif cfg.squashing == "linear":
-            rewards = cfg.alpha * -costs
         else:
-            rewards = cfg.alpha * np.exp(cfg.beta * -costs)
+            costs = costs * (costs.shape[1] / self.episode_length)  # rows of mass 1/H
+            if cfg.squashing == "linear":
+                rewards = cfg.alpha * -costs
+            else:
+                rewards = cfg.alpha * np.exp(cfg.beta * -costs)
         best = np.argsort(-rewards.sum(axis=1), kind="stable")[: cfg.top_k]
         return rewards[best].mean(axis=0)
 
@@ -172,25 +193,38 @@ def label_dataset(
     *,
     num_demos: int | None = None,
     env_id: str | None = None,
+    contact_forces: bool | None = None,
     workers: int = 1,
     on_progress: Callable[[int], None] | None = None,
 ) -> LabelSummary:
     """Label every episode of ``dataset`` with OT rewards from the first ``num_demos`` (all:
     None) demos of ``demos_file``, and write the dataset to ``out`` in its own format (see the
-    module). ``out`` must not exist (nothing is overwritten)."""
+    module). ``out`` must not exist (nothing is overwritten), and its folder must.
+    ``contact_forces``: compare Ant-v5's and Humanoid-v5's states with their contact forces
+    (None: as ilfo's imitation does, without). The dataset's and the demos' environments, where
+    both are named, must be one task (versions may differ: D4RL's Hopper-v2 and Hopper-v5)."""
     from ilfo import demos as demo_io
     from ilfo.demos.readers import detect_format
 
     dataset, out = Path(dataset), Path(out)
     if out.exists():
         raise FileExistsError(f"{out} exists: labelling writes a new file or directory")
+    if not out.parent.is_dir():
+        raise FileNotFoundError(f"{out}: its folder {out.parent} does not exist")
     fmt = detect_format(dataset)
     if fmt not in ("ilfo", "minari", "d4rl"):
         raise ValueError(f"{dataset}: labelling writes ilfo, Minari or D4RL files, not {fmt}")
+    if fmt == "ilfo" and out.suffix != ".npz":
+        raise ValueError(f"{out}: an ilfo dataset is written as a .npz file")
     data = demo_io.load_any(dataset, env_id=env_id)
     expert = demo_io.load_any(demos_file)
     if not expert.episodes:
         raise ValueError(f"{demos_file}: no demos")
+    if data.env_id and expert.env_id and _task(data.env_id) != _task(expert.env_id):
+        raise ValueError(
+            f"{demos_file} holds demos of {expert.env_id}, {dataset} episodes of "
+            f"{data.env_id}: labelling compares the states of one task"
+        )
     if num_demos is not None and not 1 <= num_demos <= len(expert.episodes):
         raise ValueError(
             f"num_demos must be between 1 and {len(expert.episodes)} (the demos in "
@@ -202,9 +236,15 @@ def label_dataset(
             f"{demos_file} has {expert_obs[0].shape[1]}-dim observations, {dataset} has "
             f"{data.episodes[0].observations.shape[1]}"
         )
+    episodes = [e.observations for e in data.episodes]
+    env = expert.env_id or data.env_id
+    if _drops_contact_forces(env, contact_forces):  # files already without them stay so
+        width = FULL_OBSERVATION_DIMS[env] - CONTACT_FORCE_DIMS[env]
+        episodes = [match_observation_width(obs, env, width) for obs in episodes]
+        expert_obs = [match_observation_width(obs, env, width) for obs in expert_obs]
     start = time.perf_counter()
     rewards = label_episodes(
-        [e.observations for e in data.episodes],
+        episodes,
         expert_obs,
         config,
         workers=workers,
@@ -212,15 +252,12 @@ def label_dataset(
     )
     seconds = time.perf_counter() - start
     writers = {"ilfo": _write_ilfo, "minari": _write_minari, "d4rl": _write_d4rl}
-    # Written beside ``out`` and renamed into place: an error or a kill midway leaves no
+    # Written beside ``out`` and moved into place: an error or a kill midway leaves no
     # half-labelled file under the labelled name (and the name free for a retry).
-    partial = out.with_name(f".partial-{out.name}")  # its suffix kept: savez adds none
-    if partial.is_dir():
-        shutil.rmtree(partial)
-    partial.unlink(missing_ok=True)
+    partial = out.with_name(f".partial-{os.getpid()}-{out.name}")  # its suffix kept
     try:
         writers[fmt](dataset, partial, data, rewards)
-        os.replace(partial, out)
+        _move_new(partial, out)
     finally:
         if partial.is_dir():
             shutil.rmtree(partial)
@@ -229,6 +266,50 @@ def label_dataset(
     return LabelSummary(
         out, fmt, len(rewards), int(flat.size), seconds, float(flat.mean()), float(flat.std())
     )
+
+
+def _task(env_id: str) -> str:
+    """The task an env id names, without its version: hopper-v2 and Hopper-v5 are one."""
+    return re.sub(r"-v\d+$", "", env_id).lower()
+
+
+def _drops_contact_forces(env_id: str, contact_forces: bool | None) -> bool:
+    """Whether ``env_id``'s states are compared without their contact forces: on Ant-v5 and
+    Humanoid-v5 unless ``contact_forces`` (None: ilfo's imitation default, without)."""
+    if env_id not in CONTACT_FORCE_DIMS:
+        if contact_forces is False:
+            raise ValueError(
+                f"--no-contact-forces applies to {', '.join(CONTACT_FORCE_DIMS)} demos, "
+                f"not {env_id or 'unnamed'} ones"
+            )
+        return False
+    if contact_forces is None:
+        contact_forces = default_contact_forces(env_id, imitation=True)
+    return not contact_forces
+
+
+def _move_new(src: Path, dst: Path) -> None:
+    """Move ``src`` to the new name ``dst``, never over a file or directory that appeared
+    there meanwhile (a FileExistsError; ``src`` is then left for the caller)."""
+    if src.is_dir():
+        if dst.exists():  # a directory rename would replace an empty one
+            raise FileExistsError(f"{dst} appeared while labelling: the labels are not written")
+        os.rename(src, dst)
+        return
+    try:
+        os.link(src, dst)  # fails if dst exists, atomically
+    except FileExistsError:
+        raise FileExistsError(
+            f"{dst} appeared while labelling: the labels are not written"
+        ) from None
+    except OSError:  # a file system without hard links: checked, then renamed
+        if dst.exists():
+            raise FileExistsError(
+                f"{dst} appeared while labelling: the labels are not written"
+            ) from None
+        os.replace(src, dst)
+        return
+    src.unlink()
 
 
 def _write_ilfo(dataset: Path, out: Path, data: Any, rewards: list[np.ndarray]) -> None:
@@ -252,9 +333,12 @@ def _write_minari(dataset: Path, out: Path, data: Any, rewards: list[np.ndarray]
     from ilfo.demos.readers import _minari_file, minari_episode_names
 
     source = _minari_file(dataset)
-    root = source.parent.parent if source.parent.name == "data" else source.parent
-    shutil.copytree(root, out)
-    target = out / source.relative_to(root)
+    if dataset.is_dir():  # the dataset directory given, its metadata with it
+        shutil.copytree(dataset, out)
+        target = out / source.relative_to(dataset)
+    else:  # its HDF5 file alone: a file, nothing from the folder it sits in
+        shutil.copyfile(source, out)
+        target = out
     with h5py.File(target, "r+") as f:
         for name, r in zip(minari_episode_names(f), rewards, strict=True):
             if "rewards" in f[name]:

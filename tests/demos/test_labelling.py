@@ -27,12 +27,16 @@ def test_rewards_are_oops_couplings_squashed_and_top_k():
     expert = [rng.normal(size=(11, 3)), rng.normal(size=(9, 3)) + 2.0]
     episode = rng.normal(size=(10, 3))
     couplings = OOPS(expert).couplings(episode)
-    costs = np.stack([c.row_costs for c in couplings])
+    costs = np.stack([c.row_costs for c in couplings])  # rows of mass 1/9 (9 transitions)
+    # OTR's masses: 1/H per step, H the longest demo's 10 transitions by default.
+    at_h = costs * 9 / 10
     exp = EpisodeLabeller(expert, LabelConfig(squashing="exponential", alpha=5, beta=5))(episode)
-    per_demo = 5 * np.exp(-5 * costs)
+    per_demo = 5 * np.exp(-5 * at_h)
     np.testing.assert_allclose(exp, per_demo[np.argmax(per_demo.sum(1))])
     both = EpisodeLabeller(expert, LabelConfig(squashing="linear", alpha=10, top_k=2))(episode)
-    np.testing.assert_allclose(both, (-10 * costs).mean(0))
+    np.testing.assert_allclose(both, (-10 * at_h).mean(0))
+    own_length = LabelConfig(squashing="linear", alpha=1, top_k=2, episode_length=9)
+    np.testing.assert_allclose(EpisodeLabeller(expert, own_length)(episode), -costs.mean(0))
     # The oops squashing against the nearest demo is OOPS's own reward with that demo selection.
     ours = EpisodeLabeller(expert, LabelConfig(squashing="oops"))(episode)
     reference = OOPS(expert, OOPSConfig(demo_selection="nearest"))(episode).rewards
@@ -41,6 +45,26 @@ def test_rewards_are_oops_couplings_squashed_and_top_k():
         EpisodeLabeller(expert, LabelConfig(top_k=3))
     with pytest.raises(ValueError, match="squashing"):
         LabelConfig(squashing="tanh")
+    for bad in ({"alpha": 0.0}, {"beta": -5.0}):  # would reward the far episodes most
+        with pytest.raises(ValueError, match="must be finite and > 0"):
+            LabelConfig(**bad)
+    with pytest.raises(ValueError, match="episode_length must be >= 1"):
+        LabelConfig(episode_length=0)
+
+
+def test_an_episode_is_not_penalised_for_being_short():
+    """OTR's per-step mass 1/H: the first 100 steps of an episode that follows a 1000-step demo
+    cost a few times what they cost in the full episode (balanced OT spreads them over the whole
+    demo), not 10 times more again, as with masses 1/T."""
+    t = np.linspace(0, 6, 1001)[:, None]
+    demo = np.hstack([np.sin(t), np.cos(t), t / 6])
+    episode = demo + np.random.default_rng(0).normal(0, 0.05, demo.shape)
+    labeller = EpisodeLabeller([demo], LabelConfig(squashing="linear", alpha=1))
+    full_cost = -labeller(episode)[:100].mean()
+    short_cost = -labeller(episode[:101]).mean()
+    assert 1 < short_cost / full_cost < 5
+    per_t = EpisodeLabeller([demo], LabelConfig(squashing="linear", alpha=1, episode_length=100))
+    assert -per_t(episode[:101]).mean() == pytest.approx(10 * short_cost)
 
 
 def test_parallel_labels_equal_serial():
@@ -129,6 +153,93 @@ def test_minari_round_trip(tmp_path):
         np.testing.assert_allclose(got.rewards, labeller(want.observations))
     original = demos.load_any(root)  # the source is untouched
     np.testing.assert_array_equal(original.episodes[0].rewards, episodes[0].rewards)
+
+
+def test_a_minari_file_given_alone_is_copied_alone(tmp_path):
+    demo_path, expert = _demos(tmp_path)
+    episodes = _episodes(seed=3)
+    root = _write_minari(tmp_path / "datasets", _minari_eps(episodes))
+    (root / "unrelated.bin").write_bytes(b"x" * 100)  # beside the dataset, not part of it
+    (tmp_path / "datasets" / "other.bin").write_bytes(b"y")
+    label_dataset(root / "data" / "main_data.hdf5", demo_path, tmp_path / "labelled.hdf5")
+    assert (tmp_path / "labelled.hdf5").is_file()
+    out = demos.load_any(tmp_path / "labelled.hdf5")
+    labeller = EpisodeLabeller(expert)
+    for got, want in zip(out.episodes, episodes, strict=True):
+        np.testing.assert_allclose(got.rewards, labeller(want.observations))
+
+
+def test_labelling_checks_the_task_and_the_output_before_it_starts(tmp_path, monkeypatch):
+    import ilfo.labelling
+
+    demo_path, _ = _demos(tmp_path)  # Hopper-v5
+    walker, hopper_v2 = tmp_path / "walker.npz", tmp_path / "hopper2.npz"
+    demos.save(walker, _episodes(seed=1), "Walker2d-v5")
+    demos.save(hopper_v2, _episodes(seed=1), "Hopper-v2")
+    with pytest.raises(ValueError, match=r"demos of Hopper-v5, .* episodes of Walker2d-v5"):
+        label_dataset(walker, demo_path, tmp_path / "w.npz")
+    label_dataset(hopper_v2, demo_path, tmp_path / "h.npz")  # another version of the task
+    d4rl = _write_d4rl(tmp_path / "data.hdf5", _episodes(seed=2), next_obs=True)
+    with pytest.raises(ValueError, match="episodes of Walker2d-v2"):
+        label_dataset(d4rl, demo_path, tmp_path / "d.hdf5", env_id="Walker2d-v2")
+
+    def never(*args, **kwargs):
+        raise AssertionError("labelled before the output was checked")
+
+    monkeypatch.setattr(ilfo.labelling, "label_episodes", never)
+    with pytest.raises(FileNotFoundError, match=r"its folder .*nodir does not exist"):
+        label_dataset(hopper_v2, demo_path, tmp_path / "nodir" / "o.npz")
+    with pytest.raises(ValueError, match=r"written as a \.npz file"):
+        label_dataset(hopper_v2, demo_path, tmp_path / "o.h5")
+
+
+def test_an_output_that_appears_while_labelling_is_not_overwritten(tmp_path, monkeypatch):
+    import ilfo.labelling
+
+    demo_path, _ = _demos(tmp_path)
+    data = tmp_path / "data.npz"
+    demos.save(data, _episodes(seed=1), "Hopper-v5")
+    out = tmp_path / "out.npz"
+    write = ilfo.labelling._write_ilfo
+
+    def meanwhile(dataset, partial, data, rewards):
+        out.write_bytes(b"someone else's")
+        write(dataset, partial, data, rewards)
+
+    monkeypatch.setattr(ilfo.labelling, "_write_ilfo", meanwhile)
+    with pytest.raises(FileExistsError, match="appeared while labelling"):
+        label_dataset(data, demo_path, out)
+    assert out.read_bytes() == b"someone else's"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["data.npz", "demos.npz", "out.npz"]
+
+
+def test_ant_states_are_compared_without_their_contact_forces(tmp_path):
+    from ilfo.envs import CONTACT_FORCE_DIMS, FULL_OBSERVATION_DIMS
+
+    full, forces = FULL_OBSERVATION_DIMS["Ant-v5"], CONTACT_FORCE_DIMS["Ant-v5"]
+    rng = np.random.default_rng(0)
+    demo = rng.normal(size=(9, full))
+    episodes = [rng.normal(size=(8, full)) for _ in range(2)]
+    for e in episodes:
+        e[:, full - forces :] *= 100.0  # contact forces that would swamp the distance
+    demo_path, data = tmp_path / "ant-demo.npz", tmp_path / "ant.npz"
+    demos.save(demo_path, [Episode(demo)], "Ant-v5")
+    demos.save(data, [Episode(e) for e in episodes], "Ant-v5")
+    label_dataset(data, demo_path, tmp_path / "without.npz")
+    label_dataset(data, demo_path, tmp_path / "with.npz", contact_forces=True)
+    without = demos.load(tmp_path / "without.npz").episodes
+    kept = full - forces
+    labeller = EpisodeLabeller([demo[:, :kept]])
+    for got, e in zip(without, episodes, strict=True):
+        assert got.observations.shape[1] == full  # the output keeps every column
+        np.testing.assert_allclose(got.rewards, labeller(e[:, :kept]))
+    with_forces = demos.load(tmp_path / "with.npz").episodes
+    assert not np.allclose(with_forces[0].rewards, without[0].rewards)
+    hopper_demo, _ = _demos(tmp_path)
+    hopper = tmp_path / "hopper.npz"
+    demos.save(hopper, _episodes(seed=1), "Hopper-v5")
+    with pytest.raises(ValueError, match="--no-contact-forces applies to Ant-v5"):
+        label_dataset(hopper, hopper_demo, tmp_path / "h.npz", contact_forces=False)
 
 
 def test_cli_and_bad_input(tmp_path, capsys):

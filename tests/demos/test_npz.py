@@ -130,8 +130,27 @@ def test_save_refuses_what_load_would_refuse_and_keeps_the_old_file(tmp_path):
             demos.save(path, episodes, "Hopper-v5")
     with pytest.raises(ValueError, match="env_id must be a string"):
         demos.save(path, _episodes(rng), None)
+    with pytest.raises(FileNotFoundError, match=r"its folder .*nodir does not exist"):
+        demos.save(tmp_path / "nodir" / "x.npz", _episodes(rng), "Hopper-v5")
     assert path.read_bytes() == before  # every refusal left the good file as it was
     assert sorted(p.name for p in tmp_path.iterdir()) == ["good.npz"]  # and no temporary
+
+
+def test_a_save_that_fails_while_writing_keeps_the_old_file(tmp_path, monkeypatch):
+    rng = np.random.default_rng(6)
+    path = tmp_path / "good.npz"
+    demos.save(path, _episodes(rng), "Hopper-v5")
+    before = path.read_bytes()
+
+    def disk_full(file, **arrays):
+        file.write(b"PK half an archive")
+        raise OSError("No space left on device")
+
+    monkeypatch.setattr(np, "savez_compressed", disk_full)
+    with pytest.raises(OSError, match="No space"):
+        demos.save(path, _episodes(rng), "Hopper-v5")
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["good.npz"]
 
 
 def test_save_writes_exactly_the_path_given(tmp_path):

@@ -303,7 +303,21 @@ def _add_label_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--demos", required=True, help="the expert demos (state-only is enough)")
     p.add_argument("--out", required=True, help="where to write the labelled dataset (new)")
     p.add_argument("--num-demos", type=int, default=None, help="use the first N demos (all)")
-    p.add_argument("--env-id", default=None, help="env id of a dataset that names none (D4RL)")
+    p.add_argument(
+        "--env-id",
+        default=None,
+        help="env id of a dataset that names none (D4RL); checked against the demos'",
+    )
+    p.add_argument(
+        "--contact-forces",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help=(
+            "Ant-v5 and Humanoid-v5: compare the states with (or without) the contact forces "
+            "that end their observations (default: as `ilfo train` imitates, without); the "
+            "output keeps every column"
+        ),
+    )
     p.add_argument(
         "--workers",
         type=int,
@@ -348,6 +362,7 @@ def _run_label(args: argparse.Namespace) -> int:
             config,
             num_demos=args.num_demos,
             env_id=args.env_id,
+            contact_forces=args.contact_forces,
             workers=workers,
             on_progress=advance,
         )

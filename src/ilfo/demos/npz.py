@@ -122,6 +122,8 @@ def save(
             if name in arrays and float32_is_lossless(arrays[name]):
                 arrays[name] = arrays[name].astype(np.float32)
     target = path.resolve()  # through a symlink to its file, as numpy wrote
+    if not target.parent.is_dir():  # else the error would name the temporary file
+        raise FileNotFoundError(f"{path} (not written): its folder {target.parent} does not exist")
     tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")  # one per writing process
     try:
         with open(tmp, "wb") as file:  # a file object: numpy adds no suffix
