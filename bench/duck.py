@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -85,7 +86,8 @@ def main() -> None:
         return env_action(np.asarray(action), agent.functions.max_action)
 
     rows = [duck_episode(act, args.first_seed + k) for k in range(args.episodes)]
-    meta = {"bench": "duck", "machine": machine(), "policy": label}
+    meta = {"bench": "duck", "date": time.strftime("%Y-%m-%d"), "machine": machine()}
+    meta["policy"] = label
     if args.json:
         for row in rows:
             print(json.dumps({**meta, **row}))

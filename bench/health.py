@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -41,7 +42,8 @@ def health_report(env: Any, observations: np.ndarray) -> dict[str, float]:
         "angle_mean": float(angle.mean()),
         "angle_min": float(angle.min()),
         "angle_max": float(angle.max()),
-        "x_velocity_mean": float(observations[:, 5].mean()),
+        # qpos without x (nq - 1 columns), then qvel: qvel[0], the x velocity, comes next.
+        "x_velocity_mean": float(observations[:, env.unwrapped.model.nq - 1].mean()),
     }
 
 
@@ -90,7 +92,13 @@ def main() -> None:
             }
         )
     demo_row = health_report(env, demo[1:])
-    meta = {"bench": "health", "machine": machine(), "env": env_id, "policy": label}
+    meta = {
+        "bench": "health",
+        "date": time.strftime("%Y-%m-%d"),
+        "machine": machine(),
+        "env": env_id,
+        "policy": label,
+    }
     if args.json:
         for row in rows:
             print(json.dumps({**meta, **row}))

@@ -113,12 +113,14 @@ class TimingHooks(LoopHooks):
 
 
 def update_chunks(num_updates: int) -> list[int]:
-    """The power-of-two chunks ``Trainer._update`` splits ``num_updates`` into."""
-    return [1 << b for b in range(num_updates.bit_length() - 1, -1, -1) if num_updates >> b & 1]
+    """Every power-of-two chunk ``Trainer._update`` may split an episode's updates into, up to
+    ``num_updates`` (a full episode's): episodes that end early (standard episodes) use
+    smaller ones."""
+    return [1 << b for b in range(num_updates.bit_length() - 1, -1, -1)]
 
 
 def precompile(trainer: Trainer) -> float:
-    """Compile ``act`` and the ``update`` chunks a full episode uses; returns the seconds."""
+    """Compile ``act`` and every ``update`` chunk an episode may use; returns the seconds."""
     start = time.perf_counter()
     funcs, state = trainer.agent.functions, trainer.state
     obs = np.zeros(trainer.buffer.obs_dim, np.float32)
@@ -187,6 +189,7 @@ def run(args: argparse.Namespace) -> tuple[dict, list[dict]]:
         "env": config.env,
         "algo": config.algo,
         "preset": config.preset,
+        "fixed_horizon": config.uses_fixed_horizon,
         "steps": config.steps,
         "start_steps": config.start_steps,
         "learning_steps": steps,
