@@ -70,6 +70,14 @@ def test_info_on_foreign_formats(capsys, tmp_path):
     info = json.loads(capsys.readouterr().out)
     assert info["env_id"] == "Hopper-v5" and info["lengths"] == [3, 5]
     assert info["return_mean"] == 8.0 and info["provenance"]["dataset_id"] == "hopper/expert-v0"
+    d4rl = tmp_path / "d4rl.hdf5"  # no next_observations: each episode's last row is dropped
+    with h5py.File(d4rl, "w") as f:
+        f["observations"] = rng.normal(size=(6, 3))
+        f["rewards"] = np.ones(6)
+        f["terminals"] = np.array([0, 0, 1, 0, 0, 1], bool)
+    assert main(["demos", "info", str(d4rl)]) == 0
+    text = capsys.readouterr().out
+    assert "return: mean 2.00" in text and "without each episode's last row" in text
 
 
 def test_convert_round_trips(capsys, tmp_path):

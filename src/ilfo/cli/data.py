@@ -259,7 +259,12 @@ def _run_demos_info(args: argparse.Namespace) -> int:
             (
                 "return",
                 f"mean {summary['return_mean']:.2f}  std {summary['return_std']:.2f}  "
-                f"min {summary['return_min']:.2f}  max {summary['return_max']:.2f}",
+                f"min {summary['return_min']:.2f}  max {summary['return_max']:.2f}"
+                + (
+                    "  (without each episode's last row: its next state is not in the file)"
+                    if summary["provenance"].get("final_transition_dropped")
+                    else ""
+                ),
             )
         )
     rows.append(("provenance", json.dumps(summary["provenance"], sort_keys=True)))
