@@ -86,7 +86,7 @@ def test_oops_adv_reward_differs_from_oops_with_a_fixed_cosine_cost(tmp_path):
     assert [r["proxy_return"] for r in adv] != [r["proxy_return"] for r in cos]
 
 
-def test_sil_flags_reach_config_json_and_the_policy_reads_back(tmp_path):
+def test_sil_flags_reach_config_json_and_the_policy_reads_back(tmp_path, capsys):
     args = ["train", "--algo", "sil", "--env", "Hopper-v5", "--demos", TINY["demos"]]
     args += ["--horizon", "50", "--steps", "100", "--eval-every", "100", "--eval-episodes", "1"]
     args += ["--out", str(tmp_path), "--no-progress", "--trpo-batch-steps", "100"]
@@ -98,7 +98,10 @@ def test_sil_flags_reach_config_json_and_the_policy_reads_back(tmp_path):
     assert config["sil"]["critic_lr"] == 0.001 and config["sil"]["expert_subsample"] == 4
     assert config["sil"]["seed"] == config["seed"]
     assert config["td3"] is None and config["oops"] is None
+    capsys.readouterr()
     assert main(["eval", str(run), "--episodes", "1", "--json"]) == 0
+    evaluated = json.loads(capsys.readouterr().out.splitlines()[-1])
+    assert evaluated["episodes"] == 1 and np.isfinite(evaluated["score_mean"])
 
 
 def test_sil_trains_on_standard_episodes_by_default_and_learns_per_batch(tmp_path):

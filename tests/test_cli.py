@@ -30,10 +30,30 @@ def test_reward_on_a_two_episode_file_scores_the_other_episode_once(capsys, tmp_
 
 
 def test_reward_with_every_solver_and_pwil(capsys):
-    for extra in (["--solver", "emd"], ["--solver", "greedy"], ["--rewarder", "pwil"]):
+    """Each flag reaches the reward: the rows are the library's numbers for those settings."""
+    from ilfo import demos
+    from ilfo.rewards import OOPS, PWIL, OOPSConfig
+
+    episodes = [e.observations for e in demos.load(bundled_demos("Hopper-v5-scripted")).episodes]
+    expert, learner = episodes[0], episodes[1]
+    rewarders = {
+        "emd": OOPS([expert], OOPSConfig(solver="emd")),
+        "greedy": OOPS([expert], OOPSConfig(solver="greedy")),
+        "pwil": PWIL([expert]),
+    }
+    rows = {}
+    for name, extra in (
+        ("emd", ["--solver", "emd"]),
+        ("greedy", ["--solver", "greedy"]),
+        ("pwil", ["--rewarder", "pwil"]),
+    ):
         assert main(["reward", "--json", "--learners", "1", *extra]) == 0
-        row = json.loads(capsys.readouterr().out)
-        assert np.isfinite(row["mean_reward"])
+        rows[name] = json.loads(capsys.readouterr().out)
+        want = rewarders[name](learner)
+        assert rows[name]["ot_distance"] == pytest.approx(want.distance, rel=1e-9)
+        assert rows[name]["mean_reward"] == pytest.approx(float(want.rewards.mean()), rel=1e-9)
+    assert rows["greedy"]["ot_distance"] >= rows["emd"]["ot_distance"]  # exact is the least
+    assert 0 < rows["pwil"]["mean_reward"] <= 5  # PWIL's exp(-distance) scale, 5 at most
 
 
 def test_reward_errors_are_clear(capsys, tmp_path):

@@ -53,6 +53,10 @@ def test_same_seed_same_episode():
     a = make_env("Hopper-v5", True, horizon=50)
     b = make_env("Hopper-v5", True, horizon=50)
     np.testing.assert_array_equal(a.reset(seed=3)[0], b.reset(seed=3)[0])
+    actions = np.random.default_rng(0).uniform(-1, 1, (30, 3))
+    for action in actions:  # the same actions from the same start: the same states
+        np.testing.assert_array_equal(a.step(action)[0], b.step(action)[0])
+    assert not np.array_equal(a.reset(seed=3)[0], b.reset(seed=4)[0])
 
 
 def test_episode_scores():

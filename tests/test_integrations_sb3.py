@@ -137,8 +137,12 @@ def test_bad_settings_are_refused_clearly():
 
 
 @pytest.mark.parametrize("name", ["SAC", "TD3", "CrossQ"])
-def test_sbx_algorithms_learn_from_the_relabelled_buffer(name):
+def test_sbx_algorithms_train_on_the_relabelled_buffer(name):
+    """sbx's algorithms fill the buffer, which relabels their episodes, and take gradient steps
+    on it (whether they learn is tested on SB3's SAC, below)."""
     sbx = pytest.importorskip("sbx")
+    import jax
+
     envs = [RandomLengthEnv(40 + j) for j in range(2)]
     model = getattr(sbx, name)(
         "MlpPolicy",
@@ -150,10 +154,14 @@ def test_sbx_algorithms_learn_from_the_relabelled_buffer(name):
         replay_buffer_kwargs={"reward": episode_reward},
         seed=0,
     )
+    before = [np.array(x) for x in jax.tree_util.tree_leaves(model.policy.actor_state.params)]
     model.learn(total_timesteps=300)
     buffer = model.replay_buffer
     assert buffer.episodes_labelled > 10 and buffer.ready.any()
     assert np.all(np.abs(buffer.rewards) < TASK_REWARD / 10)
+    assert model._n_updates > 0
+    after = jax.tree_util.tree_leaves(model.policy.actor_state.params)
+    assert any(not np.array_equal(b, np.asarray(a)) for b, a in zip(before, after, strict=True))
 
 
 class PointMass(gym.Env):

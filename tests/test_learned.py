@@ -92,7 +92,10 @@ def test_gaifo_td3_trains_deterministically_and_resume_equals_uninterrupted(tmp_
     full = _metrics(_train(tmp_path, "full", **GAIFO))
     assert full == _metrics(_train(tmp_path, "again", **GAIFO))
     learned_rows = [r for r in full if r["reward_loss"]]
-    assert learned_rows and all(0.0 <= float(r["reward_accuracy"]) <= 1.0 for r in learned_rows)
+    # Logged as a fraction of a batch (a sum, or a NaN, would leave [0, 1]); this tiny run is
+    # too short for the discriminator to beat a coin, which test_discriminator.py tests.
+    accuracies = [float(r["reward_accuracy"]) for r in learned_rows]
+    assert learned_rows and all(0.0 <= a <= 1.0 for a in accuracies)
     assert all(float(r["proxy_return"]) > 0 for r in full)  # -log(1 - D) > 0
     run = _train(tmp_path, "resumed", **{**GAIFO, "steps": 300})
     trainer = Trainer.resume(run, progress=False, steps=600)
@@ -113,7 +116,10 @@ def test_gaifo_td3_defaults_to_the_authors_td3_and_flags_reach_config_json(tmp_p
     assert config["td3"]["actor_hidden"] == [400, 300]  # the DACfO authors', not the preset's
     assert config["td3"]["init_scheme"] == "glorot"
     assert config["oops"] is None
+    capsys.readouterr()
     assert main(["eval", str(run), "--episodes", "1", "--json"]) == 0  # the policy reads back
+    evaluated = json.loads(capsys.readouterr().out.splitlines()[-1])
+    assert evaluated["episodes"] == 1 and np.isfinite(evaluated["score_mean"])
 
 
 def test_too_few_demo_transitions_for_a_batch_is_a_clear_error(tmp_path):
@@ -201,5 +207,9 @@ def test_learned_rewards_see_the_demos_up_to_the_horizon(tmp_path, monkeypatch):
     trainer = Trainer(config, tmp_path / "run", progress=False)
     assert all(len(d) > 101 for d in trainer.demos)  # longer than the horizon
     assert seen["expert_agent_obs"].shape[0] == len(seen["expert"].obs) == 2 * 100
+    for k, demo in enumerate(trainer.demos):  # each demo's first 100 transitions, in order
+        rows = slice(100 * k, 100 * (k + 1))
+        np.testing.assert_allclose(seen["expert"].obs[rows], demo[:100], rtol=1e-6)
+        np.testing.assert_allclose(seen["expert"].next_obs[rows], demo[1:101], rtol=1e-6)
     times = np.asarray(seen["expert_agent_obs"][:, -1])
     assert times.min() > 0 and times.max() <= 1

@@ -52,12 +52,15 @@ def test_checksums_and_demos_match_the_card(directory):
 
 
 def _band(mean, std):
-    return max(3 * std, 0.1 * abs(mean))
+    """3 std, at least 10% of the mean, at most 25%: experts whose returns spread widely
+    (MinitaurDuck's lose the duck at any time) would otherwise accept a policy doing nothing."""
+    return min(max(3 * std, 0.1 * abs(mean)), 0.25 * abs(mean))
 
 
 @pytest.mark.parametrize("directory", SHIPPED, ids=lambda p: p.name)
 def test_expert_still_scores_its_demos(directory):
-    """The expert, replayed on its first two demos' seeds, scores as those demos did."""
+    """The expert, replayed on its first two demos' seeds, starts as those demos did (the
+    same states for 100 steps) and scores as they did."""
     card = _card(directory)  # Hopper's card predates demo_seeds: the demo file has them
     expert = load_expert(directory)
     data = demos.load(directory / "demos.npz")
@@ -66,6 +69,9 @@ def test_expert_still_scores_its_demos(directory):
         rollout = expert.rollout(seed=seed)
         terminated = None if demo.terminated is None else rollout.env_terminated  # as recorded
         replayed = demos.Episode(rollout.observations, None, rollout.rewards, terminated)
+        np.testing.assert_allclose(
+            rollout.observations[:100], demo.observations[:100], rtol=0, atol=1e-3
+        )
         assert abs(replayed.task_score - demo.task_score) <= band, (seed, replayed.task_score)
 
 

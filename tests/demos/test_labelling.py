@@ -250,6 +250,11 @@ def test_cli_and_bad_input(tmp_path, capsys):
     assert main([*args, "--squashing", "linear", "--workers", "1", "--oops-reg", "0.1"]) == 0
     captured = capsys.readouterr()
     assert "3 episodes" in captured.out and "labelling" in captured.err  # the progress bar
+    # The flags reached the labels: the library's, with the same settings.
+    expert = [e.observations for e in demos.load(demo_path).episodes]
+    labeller = EpisodeLabeller(expert, LabelConfig(squashing="linear", oops=OOPSConfig(reg=0.1)))
+    for got in demos.load(tmp_path / "o.npz").episodes:
+        np.testing.assert_allclose(got.rewards, labeller(got.observations.astype(np.float64)))
     wide = tmp_path / "wide.npz"
     demos.save(wide, [Episode(np.zeros((5, 7)))], "Hopper-v5")
     assert main(["label", str(data), "--demos", str(wide), "--out", str(tmp_path / "x.npz")]) == 2

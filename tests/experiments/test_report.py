@@ -95,9 +95,11 @@ def test_profile_and_probability_of_improvement_by_hand():
     u = [scipy_stats.mannwhitneyu(a[:, t], b[:, t]).statistic / (6 * 4) for t in range(2)]
     assert stats.probability_of_improvement(a, b) == pytest.approx(np.mean(u))
     interval = stats.probability_of_improvement_interval(a, b, resamples=500)
-    assert 0 <= interval.low <= interval.value <= interval.high <= 1
+    assert interval.value == pytest.approx(stats.probability_of_improvement(a, b))
+    assert 0 <= interval.low < interval.value < interval.high <= 1
     profile, low, high = stats.performance_profile_band(a, np.array([0.0]), resamples=200)
-    assert low[0] <= profile[0] <= high[0]
+    assert profile == pytest.approx(stats.performance_profile(a, [0.0]))
+    assert low[0] <= profile[0] <= high[0] and low[0] < high[0]
 
 
 def test_a_run_is_finished_by_its_last_episode_not_its_last_evaluation(tmp_path):

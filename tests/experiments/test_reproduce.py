@@ -148,7 +148,8 @@ def test_measures_are_cached_per_trained_step_and_skip_unfinished_runs(tmp_path)
 
 def test_calibration_smoke_and_its_numbers(tmp_path):
     """The calibration's smoke budget: the expert, its noisy versions, zero and random actions;
-    the expert's proxy return is the highest and the rank correlation is written."""
+    the expert's proxy return is the highest, the noisier the lower (measured: -172, -196,
+    -243 for zero actions, -259 for random ones), and the rank correlation is written."""
     from ilfo.experiments.calibration import calibrate, spearman
 
     points = calibrate("Hopper-v5", (0.0, 1.0), episodes=1, horizon=100)
@@ -156,8 +157,10 @@ def test_calibration_smoke_and_its_numbers(tmp_path):
         "expert + N(0, 0.0^2)", "expert + N(0, 1.0^2)", "zero", "random"
     ]  # fmt: skip
     by = {p.policy: p for p in points}
-    assert by["expert + N(0, 0.0^2)"].proxy_return > by["random"].proxy_return
-    assert -1 <= spearman(points) <= 1
+    proxies = [p.proxy_return for p in points]
+    assert proxies == sorted(proxies, reverse=True)  # expert, noisy, zero, random
+    assert by["expert + N(0, 0.0^2)"].task_score > by["random"].task_score
+    assert spearman(points) > 0
     assert main(["reproduce", "calibration", "--budget", "smoke", "--dir", str(tmp_path),
                  "--no-progress"]) == 0  # fmt: skip
     text = (tmp_path / "report" / "calibration.md").read_text()

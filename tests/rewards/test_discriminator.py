@@ -91,6 +91,24 @@ def test_discriminator_loss_parts_match_their_definitions():
     bce = -jnp.mean(jnp.log(p_e)) - jnp.mean(jnp.log(1.0 - p_l))
     assert float(loss) == pytest.approx(float(bce), rel=1e-5)
     assert float(parts["reward_loss"]) == pytest.approx(float(bce), rel=1e-5)
+    # The entropy bonus (GAIL's: the mean Bernoulli entropy of D over both batches) is
+    # subtracted, and the gradient penalty, at points mixed by the key's uniform draws, added.
+    p = jnp.concatenate([p_e, p_l])
+    entropy = jnp.mean(-p * jnp.log(p) - (1.0 - p) * jnp.log(1.0 - p))
+    with_entropy = Discriminator(DiscriminatorConfig(grad_penalty=0.0, entropy_coef=0.1))
+    loss, _ = with_entropy.loss(state.params, state, learner, expert, jax.random.PRNGKey(0))
+    assert float(loss) == pytest.approx(float(bce - 0.1 * entropy), rel=1e-5)
+    penalised = Discriminator(DiscriminatorConfig(grad_penalty=10.0, entropy_coef=0.0))
+    key = jax.random.PRNGKey(7)
+    loss, parts = penalised.loss(state.params, state, learner, expert, key)
+    x_e = penalised._inputs(state, expert.obs, expert.next_obs)
+    x_l = penalised._inputs(state, learner.obs, learner.next_obs)
+    logit_fn = lambda x: penalised._net.apply(state.params, x)[..., 0]  # noqa: E731
+    mix = jax.random.uniform(key, (x_e.shape[0], 1))
+    penalty = gradient_penalty(logit_fn, x_e, x_l, mix)
+    assert float(penalty) > 0
+    assert float(parts["grad_penalty"]) == pytest.approx(float(penalty), rel=1e-5)
+    assert float(loss) == pytest.approx(float(bce + 10.0 * penalty), rel=1e-5)
 
 
 def test_expert_transitions_pairs_consecutive_states_and_checks_sizes():

@@ -127,7 +127,8 @@ def test_pwil_subsample_keeps_every_kth_state_from_a_seeded_offset():
         first, second = pwil.expert_atoms[:10], pwil.expert_atoms[10:]
         k = int(np.flatnonzero((full.expert_atoms[:40] == first[0]).all(axis=1))[0])
         np.testing.assert_array_equal(first, full.expert_atoms[k:40:4])
-        assert ((full.expert_atoms[40:] == second[0]).all(axis=1)).any()
+        k2 = int(np.flatnonzero((full.expert_atoms[40:] == second[0]).all(axis=1))[0])
+        np.testing.assert_array_equal(second, full.expert_atoms[40 + k2 : 80 : 4])
         offsets.add(k)
         again = PWIL(demos, PWILConfig(subsample=4, seed=seed)).expert_atoms
         np.testing.assert_array_equal(pwil.expert_atoms, again)  # the seed fixes the offsets
