@@ -43,7 +43,7 @@ import numpy as np
 from ilfo.envs import CONTACT_FORCE_DIMS, FULL_OBSERVATION_DIMS, match_observation_width
 from ilfo.experiments.worker import THREAD_VARIABLES
 from ilfo.rewards import OOPS, OOPSConfig
-from ilfo.training.config import default_contact_forces
+from ilfo.training.config import imitation_drops_contact_forces
 
 Squashing = Literal["oops", "linear", "exponential"]
 
@@ -238,7 +238,7 @@ def label_dataset(
         )
     episodes = [e.observations for e in data.episodes]
     env = expert.env_id or data.env_id
-    if _drops_contact_forces(env, contact_forces):  # files already without them stay so
+    if imitation_drops_contact_forces(env, contact_forces):  # files already without them stay so
         width = FULL_OBSERVATION_DIMS[env] - CONTACT_FORCE_DIMS[env]
         episodes = [match_observation_width(obs, env, width) for obs in episodes]
         expert_obs = [match_observation_width(obs, env, width) for obs in expert_obs]
@@ -271,21 +271,6 @@ def label_dataset(
 def _task(env_id: str) -> str:
     """The task an env id names, without its version: hopper-v2 and Hopper-v5 are one."""
     return re.sub(r"-v\d+$", "", env_id).lower()
-
-
-def _drops_contact_forces(env_id: str, contact_forces: bool | None) -> bool:
-    """Whether ``env_id``'s states are compared without their contact forces: on Ant-v5 and
-    Humanoid-v5 unless ``contact_forces`` (None: ilfo's imitation default, without)."""
-    if env_id not in CONTACT_FORCE_DIMS:
-        if contact_forces is False:
-            raise ValueError(
-                f"--no-contact-forces applies to {', '.join(CONTACT_FORCE_DIMS)} demos, "
-                f"not {env_id or 'unnamed'} ones"
-            )
-        return False
-    if contact_forces is None:
-        contact_forces = default_contact_forces(env_id, imitation=True)
-    return not contact_forces
 
 
 def _move_new(src: Path, dst: Path) -> None:

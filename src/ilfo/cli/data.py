@@ -15,7 +15,7 @@ from ilfo import demos
 from ilfo.envs import CONTACT_FORCE_DIMS, FULL_OBSERVATION_DIMS, match_observation_width
 from ilfo.paths import bundled_demos
 from ilfo.rewards import OOPS, PWIL, OOPSConfig
-from ilfo.training.config import default_contact_forces
+from ilfo.training.config import imitation_drops_contact_forces
 
 
 def _add_reward_parser(sub: argparse._SubParsersAction) -> None:
@@ -80,7 +80,7 @@ def _run_reward(args: argparse.Namespace) -> int:
     path = args.demos or bundled_demos("Hopper-v5-scripted")
     data = demos.load(path)
     episodes = [e.observations for e in data.episodes]
-    dropped = _drops_contact_forces(data.env_id, args.contact_forces)
+    dropped = imitation_drops_contact_forces(data.env_id, args.contact_forces)
     if dropped:  # a file already without them is left as it is
         width = FULL_OBSERVATION_DIMS[data.env_id] - CONTACT_FORCE_DIMS[data.env_id]
         episodes = [match_observation_width(obs, data.env_id, width) for obs in episodes]
@@ -137,21 +137,6 @@ def _run_reward(args: argparse.Namespace) -> int:
                 f"{out.coupling.iterations!s:>6s} {out.coupling.converged!s:>5s} {ms:8.1f}"
             )
     return 0
-
-
-def _drops_contact_forces(env_id: str, contact_forces: bool | None) -> bool:
-    """Whether ``ilfo reward`` scores ``env_id``'s demos without their contact forces:
-    ``contact_forces`` False, or None on an env whose imitation drops them by default."""
-    if env_id not in CONTACT_FORCE_DIMS:
-        if contact_forces is False:
-            raise ValueError(
-                f"--no-contact-forces applies to {', '.join(CONTACT_FORCE_DIMS)} demos, "
-                f"not {env_id}'s"
-            )
-        return False
-    if contact_forces is None:
-        contact_forces = default_contact_forces(env_id, imitation=True)
-    return not contact_forces
 
 
 def _add_demos_parser(sub: argparse._SubParsersAction) -> None:

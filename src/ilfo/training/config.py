@@ -287,6 +287,22 @@ def default_contact_forces(env: str, imitation: bool) -> bool:
     return env not in CONTACT_FORCE_DIMS or not imitation
 
 
+def imitation_drops_contact_forces(env_id: str, contact_forces: bool | None) -> bool:
+    """Whether imitation compares ``env_id``'s states without their contact forces (``ilfo
+    reward``, ``ilfo label``): ``contact_forces`` False, or None on an env whose imitation drops
+    them by default. ValueError for False on an env without them."""
+    if env_id not in CONTACT_FORCE_DIMS:
+        if contact_forces is False:
+            raise ValueError(
+                f"--no-contact-forces applies to {', '.join(CONTACT_FORCE_DIMS)} demos, "
+                f"not {env_id or 'unnamed'}'s"
+            )
+        return False
+    if contact_forces is None:
+        contact_forces = default_contact_forces(env_id, imitation=True)
+    return not contact_forces
+
+
 def preset_changes_agent(config: TrainConfig, horizon: int = 1000) -> bool:
     """Whether the other ``preset`` would build ``config``'s agent otherwise (TD3 and DDPG's
     network sizes; not SAC, OPOLO, or the baselines' authors' settings)."""
