@@ -276,22 +276,19 @@ def _task(env_id: str) -> str:
 def _move_new(src: Path, dst: Path) -> None:
     """Move ``src`` to the new name ``dst``, never over a file or directory that appeared
     there meanwhile (a FileExistsError; ``src`` is then left for the caller)."""
+    taken = FileExistsError(f"{dst} appeared while labelling: the labels are not written")
     if src.is_dir():
         if dst.exists():  # a directory rename would replace an empty one
-            raise FileExistsError(f"{dst} appeared while labelling: the labels are not written")
+            raise taken
         os.rename(src, dst)
         return
     try:
         os.link(src, dst)  # fails if dst exists, atomically
     except FileExistsError:
-        raise FileExistsError(
-            f"{dst} appeared while labelling: the labels are not written"
-        ) from None
+        raise taken from None
     except OSError:  # a file system without hard links: checked, then renamed
         if dst.exists():
-            raise FileExistsError(
-                f"{dst} appeared while labelling: the labels are not written"
-            ) from None
+            raise taken from None
         os.replace(src, dst)
         return
     src.unlink()
