@@ -290,6 +290,44 @@ def test_an_unwritable_out_is_one_line(tmp_path, capsys):
     assert str(blocker) in err
 
 
+def test_a_checkpoint_is_on_the_disk_before_its_rename_and_before_older_ones_go(
+    tmp_path, monkeypatch
+):
+    """A power loss must not leave the new checkpoint's name with empty files and no older
+    checkpoint: its files and directory are flushed, then renamed, then the rename flushed,
+    and only then is the older checkpoint removed."""
+    import shutil
+
+    events = []
+    fsync, replace, rmtree = os.fsync, os.replace, shutil.rmtree
+
+    def record_fsync(fd):
+        events.append(("fsync", os.readlink(f"/proc/self/fd/{fd}")))
+        fsync(fd)
+
+    def record_replace(src, dst):
+        events.append(("replace", str(src), str(dst)))
+        replace(src, dst)
+
+    def record_rmtree(path, *args, **kwargs):
+        events.append(("rmtree", str(path)))
+        rmtree(path, *args, **kwargs)
+
+    monkeypatch.setattr(os, "fsync", record_fsync)
+    monkeypatch.setattr(os, "replace", record_replace)
+    monkeypatch.setattr(shutil, "rmtree", record_rmtree)
+    run = _train(tmp_path, "run", steps=200, checkpoint_every=100)
+    root = run / "checkpoints"
+    final = root / "step_000000200"
+    tmp = root / ".tmp_step_000000200"
+    rename = events.index(("replace", str(tmp), str(final)))
+    removal = events.index(("rmtree", str(root / "step_000000100")))
+    synced_before = {e[1] for e in events[:rename] if e[0] == "fsync"}
+    files = {str(tmp / p.relative_to(final)) for p in final.rglob("*")}
+    assert files and files | {str(tmp)} <= synced_before
+    assert ("fsync", str(root)) in events[rename:removal]
+
+
 def test_a_full_disk_during_a_checkpoint_is_one_line_and_keeps_what_was_written(
     tmp_path, capsys, monkeypatch
 ):

@@ -7,8 +7,9 @@ for the normaliser (``random_states.npz``), the episode reward's state (``state.
 ``best_policy.json``, where there is one) and the counters (``state.json``, written last).
 Every other source of randomness is derived from (seed, episode index), so a run resumed from
 a checkpoint reproduces the uninterrupted one exactly. It is written in ``.tmp_step_N`` and
-renamed once complete; older checkpoints are removed after, so a kill at any moment leaves at
-least one complete checkpoint (``run_dir.latest_checkpoint`` finds the newest).
+flushed to the disk and renamed once complete; older checkpoints are removed after, so a kill
+(or a power loss) at any moment leaves at least one complete checkpoint
+(``run_dir.latest_checkpoint`` finds the newest).
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from typing import Any
 import flax.serialization
 import numpy as np
 
-from ilfo.files import load_msgpack, load_npz
+from ilfo.files import load_msgpack, load_npz, sync_dir, sync_tree
 from ilfo.replay import ReplayBuffer
 from ilfo.rewards import RewardState
 from ilfo.training.run_dir import (
@@ -99,8 +100,12 @@ def save_checkpoint(run_dir: Path, ckpt: Checkpoint) -> Path:
         "refill_until": ckpt.refill_until,
     }
     (tmp / "state.json").write_text(json.dumps(meta))  # last: see run_dir.CHECKPOINT_FILES
+    # On the disk before the rename, and the rename before the older checkpoints go: else a
+    # power loss could leave the new name with empty files and no older checkpoint.
+    sync_tree(tmp)
     fault_point("checkpoint_before_rename")
     os.replace(tmp, final)
+    sync_dir(root)
     fault_point("checkpoint_before_cleanup")
     for _, old in checkpoint_steps(run_dir)[:-1]:
         shutil.rmtree(old, ignore_errors=True)
