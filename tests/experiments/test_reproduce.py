@@ -135,8 +135,13 @@ def test_measures_are_cached_per_trained_step_and_skip_unfinished_runs(tmp_path)
         return {"s": float(len(calls))}
 
     run = SimpleNamespace(run_dir=tmp_path, trained_step=1000)
-    assert _cached(run, "d.json", 10, compute) == {"s": 1.0}
-    assert _cached(run, "d.json", 10, compute) == {"s": 1.0} and len(calls) == 1
+    lines = []
+    assert _cached(run, "d.json", 10, compute, lines.append) == {"s": 1.0}
+    # Minutes of rollouts and solves are announced, and timed; a kept value is not.
+    assert len(lines) == 2 and "measuring d, 10 final rollouts" in lines[0]
+    assert lines[1].startswith(f"{tmp_path.name}: d measured in ")
+    assert _cached(run, "d.json", 10, compute, lines.append) == {"s": 1.0} and len(calls) == 1
+    assert len(lines) == 2
     assert _cached(run, "d.json", 5, compute) == {"s": 2.0}  # other episodes
     run.trained_step = 2000
     assert _cached(run, "d.json", 5, compute) == {"s": 3.0}  # trained on since

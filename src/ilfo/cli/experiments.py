@@ -235,6 +235,10 @@ class _Progress:
         if message:
             self._bar.write(message)
 
+    def write(self, line: str) -> None:
+        """A line above the bar (printed whether or not the bar is shown)."""
+        self._bar.write(line)
+
     def close(self) -> None:
         self._bar.close()
 
@@ -392,7 +396,9 @@ def _run_reproduce(args: argparse.Namespace) -> int:
     display = _Progress([], enabled=not args.no_progress)
     try:
         with stop_signals_interrupt():
-            _, written = reproduce(args.name, args.budget, root, factory, on_change=display.update)
+            _, written = reproduce(
+                args.name, args.budget, root, factory, on_change=display.update, log=display.write
+            )
     finally:
         display.close()
     print(f"report: {written[0]}")

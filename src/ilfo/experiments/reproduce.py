@@ -21,6 +21,7 @@ experiment once their algo name is in ``ilfo.algos``.
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -372,9 +373,11 @@ def reproduce(
     backend_factory: Any,
     *,
     on_change: Any = None,
+    log: Callable[[str], None] = print,
 ) -> tuple[Plan, list[Path]]:
     """Run the plan's sweeps in ``root/<sweep>`` (each resumable: run it again to continue)
-    and write the report to ``root/report``; returns the plan and the report's files."""
+    and write the report to ``root/report``; returns the plan and the report's files.
+    ``log`` gets a line as each run's final rollouts are measured (minutes each)."""
     from ilfo.experiments.backends import run_sweep
     from ilfo.experiments.report import build_report, collect_runs, write_report
     from ilfo.experiments.sweep import create_sweep
@@ -398,16 +401,24 @@ def reproduce(
     out = root / "report"
     written = write_report(report, out, sources=[f"ilfo reproduce {name} --budget {budget}"])
     if "distances" in the_plan.measures:
-        written += write_distances(runs, out, the_plan.measure_episodes)
+        written += write_distances(runs, out, the_plan.measure_episodes, log=log)
     if "solvers" in the_plan.measures:
-        written += write_solvers(runs, out, the_plan.measure_episodes)
+        written += write_solvers(runs, out, the_plan.measure_episodes, log=log)
     return the_plan, written
 
 
-def _cached(run: Any, name: str, episodes: int, compute: Any) -> dict[str, float]:
+def _cached(
+    run: Any,
+    name: str,
+    episodes: int,
+    compute: Any,
+    log: Callable[[str], None] | None = None,
+) -> dict[str, float]:
     """``compute()``'s values for a run, kept in its directory as ``name``: computed again only
-    where the run trained on since (its last step) or other ``episodes`` are asked for."""
+    where the run trained on since (its last step) or other ``episodes`` are asked for.
+    ``log`` gets a line before and after a computation (not for a value kept from before)."""
     import json
+    import time
 
     from ilfo.files import write_json_atomic
 
@@ -417,8 +428,16 @@ def _cached(run: Any, name: str, episodes: int, compute: Any) -> dict[str, float
         kept = json.loads(cache.read_text())
         if kept.get("key") == key:
             return kept["values"]
+    if log is not None:
+        log(
+            f"{run.run_dir.name}: measuring {Path(name).stem}, {episodes} final rollouts against "
+            f"{episodes} expert trajectories ..."
+        )
+    start = time.monotonic()
     values = compute()
     write_json_atomic(cache, {"key": key, "values": values})
+    if log is not None:
+        log(f"{run.run_dir.name}: {Path(name).stem} measured in {time.monotonic() - start:.0f} s")
     return values
 
 
@@ -435,9 +454,12 @@ def _left_out_line(names: list[str]) -> list[str]:
     return ["", f"Not measured, unfinished: {', '.join(names)}."]
 
 
-def write_distances(runs: list[Any], out: Path, episodes: int = 10) -> list[Path]:
+def write_distances(
+    runs: list[Any], out: Path, episodes: int = 10, log: Callable[[str], None] | None = None
+) -> list[Path]:
     """Table 3: each run's distances (cached in its directory as distances.json), their mean
-    per task x algo x demos beside the paper's, as ``distances.csv`` and ``distances.md``."""
+    per task x algo x demos beside the paper's, as ``distances.csv`` and ``distances.md``.
+    ``log``: see ``_cached``."""
 
     import numpy as np
 
@@ -452,6 +474,7 @@ def write_distances(runs: list[Any], out: Path, episodes: int = 10) -> list[Path
             "distances.json",
             episodes,
             lambda run=run: run_distances(run.run_dir, episodes=episodes, experts=episodes),
+            log,
         )
         per_cell.setdefault((run.env, run.algo, run.num_demos), []).append(values)
     paper = {(c.env, c.algo, c.space): c for c in paper_cells() if c.table == "table3"}
@@ -490,10 +513,12 @@ def write_distances(runs: list[Any], out: Path, episodes: int = 10) -> list[Path
     return [md_path, csv_path]
 
 
-def write_solvers(runs: list[Any], out: Path, episodes: int = 10) -> list[Path]:
+def write_solvers(
+    runs: list[Any], out: Path, episodes: int = 10, log: Callable[[str], None] | None = None
+) -> list[Path]:
     """The solver figure: per run, the (s, s') transport costs of its final rollouts under each
     coupling (cached in the run as solvers.json), as ``solvers.md``, ``solvers.csv`` and
-    ``solvers_<env>_<seed>.png``."""
+    ``solvers_<env>_<seed>.png``. ``log``: see ``_cached``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -512,6 +537,7 @@ def write_solvers(runs: list[Any], out: Path, episodes: int = 10) -> list[Path]:
             lambda run=run: solver_distances(
                 *final_rollouts(run.run_dir, episodes=episodes, experts=episodes)
             ),
+            log,
         )
         rows.append({"env": run.env, "algo": run.algo, "seed": run.seed, **values})
     csv_path = out / "solvers.csv"
