@@ -151,6 +151,48 @@ def test_measures_are_cached_per_trained_step_and_skip_unfinished_runs(tmp_path)
     assert "Not measured, unfinished: Hopper-v5__oops-td3__0." in (out / "distances.md").read_text()
 
 
+def test_an_interrupted_measurement_continues_from_its_last_pair(tmp_path, monkeypatch):
+    """The solver figure's pairs take about a minute each: a measurement stopped part-way
+    keeps its pairs and, run again, measures only the others, to the uninterrupted mean."""
+    from types import SimpleNamespace
+
+    from ilfo.experiments import distances
+    from ilfo.experiments.reproduce import _measure_pairs
+
+    rng = np.random.default_rng(0)
+    trajectories = [
+        distances.Trajectory(rng.normal(size=(6, 2)), rng.normal(size=(5, 1))) for _ in range(5)
+    ]
+    rollouts, experts = trajectories[:3], trajectories[3:]
+    monkeypatch.setattr(distances, "final_rollouts", lambda *a, **k: (rollouts, experts))
+    calls = []
+
+    def measure(rollout, expert):
+        calls.append((id(rollout), id(expert)))
+        if len(calls) == 4:
+            raise KeyboardInterrupt
+        return {"d": distances.wasserstein(rollout.observations, expert.observations)}
+
+    run = SimpleNamespace(run_dir=tmp_path, trained_step=1000)
+    with pytest.raises(KeyboardInterrupt):
+        _measure_pairs(run, "m.json", 2, measure)
+    assert len(json.loads((tmp_path / ".m.partial.json").read_text())["pairs"]) == 3
+    lines = []
+    values = _measure_pairs(run, "m.json", 2, measure, lines.append)
+    assert len(calls) == 4 + 3  # the fourth pair again, then the last two; not the first three
+    expected = np.mean([measure(r, e)["d"] for r in rollouts for e in experts])
+    assert values == {"d": pytest.approx(expected, rel=1e-12)}
+    assert "3 of 6 pairs kept from before" in lines[1]
+    assert not (tmp_path / ".m.partial.json").exists() and (tmp_path / "m.json").is_file()
+    # Pairs kept for another final policy are measured again.
+    (tmp_path / ".m.partial.json").write_text(
+        json.dumps({"key": {"trained_step": 500, "episodes": 2}, "pairs": {"0,0": {"d": 9.0}}})
+    )
+    run.trained_step, before = 2000, len(calls)
+    assert _measure_pairs(run, "m.json", 2, measure)["d"] == pytest.approx(expected, rel=1e-12)
+    assert len(calls) - before == 6
+
+
 def test_calibration_smoke_and_its_numbers(tmp_path):
     """The calibration's smoke budget: the expert, its noisy versions, zero and random actions;
     the expert's proxy return is the highest, the noisier the lower (measured: -172, -196,

@@ -14,7 +14,7 @@ experts. A run is compared in the space it observed (the demos sliced to match).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -60,17 +60,50 @@ def wasserstein(x: np.ndarray, y: np.ndarray) -> float:
     return float(emd(cost).cost)
 
 
+def pair_distances(
+    rollout: Trajectory, expert: Trajectory, spaces: Sequence[Space] = SPACES
+) -> dict[str, float]:
+    """One (rollout, expert trajectory) pair's exact W1 in each space."""
+    return {space: wasserstein(atoms(rollout, space), atoms(expert, space)) for space in spaces}
+
+
 def distances(
     rollouts: Sequence[Trajectory], experts: Sequence[Trajectory], spaces: Sequence[Space] = SPACES
 ) -> dict[str, float]:
     """Mean W1 over every (rollout, expert trajectory) pair, per space."""
+    return mean_over_pairs(rollouts, experts, lambda r, e: pair_distances(r, e, spaces))
+
+
+PairMeasure = Callable[[Trajectory, Trajectory], dict[str, float]]
+
+
+def mean_over_pairs(
+    rollouts: Sequence[Trajectory],
+    experts: Sequence[Trajectory],
+    measure: PairMeasure,
+    done: Mapping[str, dict[str, float]] | None = None,
+    on_pair: Callable[[str, dict[str, float]], None] | None = None,
+) -> dict[str, float]:
+    """The mean of ``measure(rollout, expert)`` over every pair, value by value.
+
+    Pairs are named ``"i,j"`` (rollout i, expert trajectory j). ``done``: values measured
+    before (an interrupted measurement's), not measured again; ``on_pair(name, values)`` is
+    called after each new pair, to keep it (minutes of work: the solver figure's pair is
+    about a minute)."""
     if not rollouts or not experts:
         raise ValueError("distances need at least one rollout and one expert trajectory")
-    out = {}
-    for space in spaces:
-        pairs = [wasserstein(atoms(r, space), atoms(e, space)) for r in rollouts for e in experts]
-        out[space] = float(np.mean(pairs))
-    return out
+    values: dict[str, dict[str, float]] = {}
+    for i, rollout in enumerate(rollouts):
+        for j, expert in enumerate(experts):
+            name = f"{i},{j}"
+            if done is not None and name in done:
+                values[name] = done[name]
+                continue
+            values[name] = measure(rollout, expert)
+            if on_pair is not None:
+                on_pair(name, values[name])
+    keys = next(iter(values.values())).keys()
+    return {k: float(np.mean([v[k] for v in values.values()])) for k in keys}
 
 
 def demo_trajectories(demo_file: str | Path, limit: int = 10) -> list[Trajectory]:
@@ -115,15 +148,25 @@ def final_rollouts(
     return rollouts, expert_trajectories
 
 
-def run_distances(
-    run_dir: str | Path, *, episodes: int = 10, experts: int = 10
-) -> dict[str, float]:
-    """Table 3's distances of a run's final policy (``final_rollouts``) in every space."""
-    return distances(*final_rollouts(run_dir, episodes=episodes, experts=experts))
-
-
 SOLVER_LAMBDAS: tuple[float, ...] = (0.001, 0.005, 0.01, 0.05, 0.1, 0.5, 1.0)
 """The paper's solver figure's range of the Sinkhorn lambda (0.001 to 1)."""
+
+
+def solver_costs(
+    rollout: Trajectory, expert: Trajectory, lambdas: Sequence[float] = SOLVER_LAMBDAS
+) -> dict[str, float]:
+    """One pair's (s, s') transport cost under the exact coupling (``W_simplex``), PWIL's
+    greedy one (``W_greedy``) and Sinkhorn's at each lambda (``W_Sk(lambda)``, the cost
+    <C, P> of its plan, and ``converged(lambda)``: 1.0 or 0.0)."""
+    from ilfo.ot import cost_matrix, emd, greedy, sinkhorn
+
+    cost = cost_matrix(atoms(rollout, "s,s'"), atoms(expert, "s,s'"), "euclidean")
+    out = {"W_simplex": emd(cost).cost, "W_greedy": greedy(cost).cost}
+    for lam in lambdas:
+        result = sinkhorn(cost, reg=lam)
+        out[f"W_Sk({lam:g})"] = result.cost
+        out[f"converged({lam:g})"] = float(result.converged)
+    return {k: float(v) for k, v in out.items()}
 
 
 def solver_distances(
@@ -131,21 +174,9 @@ def solver_distances(
     experts: Sequence[Trajectory],
     lambdas: Sequence[float] = SOLVER_LAMBDAS,
 ) -> dict[str, float]:
-    """The paper's solver figure: the (s, s') transport cost of each rollout to each expert
-    trajectory under the exact coupling (``W_simplex``), PWIL's greedy one (``W_greedy``)
-    and Sinkhorn's at each lambda (``W_Sk(lambda)``, the cost <C, P> of its plan; with the
-    share of its solves that converged as ``converged(lambda)``), averaged over the pairs.
-    Every coupling's cost bounds the exact one from above: lower is tighter."""
-    from ilfo.ot import cost_matrix, emd, greedy, sinkhorn
-
-    sums: dict[str, list[float]] = {}
-    for r in rollouts:
-        for e in experts:
-            cost = cost_matrix(atoms(r, "s,s'"), atoms(e, "s,s'"), "euclidean")
-            sums.setdefault("W_simplex", []).append(emd(cost).cost)
-            sums.setdefault("W_greedy", []).append(greedy(cost).cost)
-            for lam in lambdas:
-                result = sinkhorn(cost, reg=lam)
-                sums.setdefault(f"W_Sk({lam:g})", []).append(result.cost)
-                sums.setdefault(f"converged({lam:g})", []).append(float(result.converged))
-    return {k: float(np.mean(v)) for k, v in sums.items()}
+    """The paper's solver figure: ``solver_costs`` averaged over every (rollout, expert
+    trajectory) pair (``converged(lambda)`` becomes the share of solves that converged).
+    Every coupling's cost bounds the exact one from above: lower is tighter. An unconverged
+    Sinkhorn plan is not a coupling of the two measures (its marginals are off), so its cost
+    can fall below the exact one."""
+    return mean_over_pairs(rollouts, experts, lambda r, e: solver_costs(r, e, lambdas))

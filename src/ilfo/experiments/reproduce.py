@@ -423,7 +423,7 @@ def _cached(
     from ilfo.files import write_json_atomic
 
     cache = run.run_dir / name
-    key = {"trained_step": run.trained_step, "episodes": episodes}
+    key = _cache_key(run, episodes)
     if cache.is_file():
         kept = json.loads(cache.read_text())
         if kept.get("key") == key:
@@ -439,6 +439,63 @@ def _cached(
     if log is not None:
         log(f"{run.run_dir.name}: {Path(name).stem} measured in {time.monotonic() - start:.0f} s")
     return values
+
+
+def _cache_key(run: Any, episodes: int) -> dict[str, int]:
+    """What a run's cached measure was measured on: its final policy's step, and the episodes."""
+    return {"trained_step": run.trained_step, "episodes": episodes}
+
+
+PROGRESS_LOG_SECONDS = 60.0
+"""A pair-by-pair measurement says how far it is at most this often."""
+
+
+def _measure_pairs(
+    run: Any,
+    name: str,
+    episodes: int,
+    measure: Any,
+    log: Callable[[str], None] | None = None,
+) -> dict[str, float]:
+    """``measure(rollout, expert)`` averaged over the pairs of a run's final rollouts and its
+    first expert trajectories (``distances.mean_over_pairs``), cached as ``name`` (see
+    ``_cached``). Each pair is kept in ``.<name>.partial.json`` as it is measured, so an
+    interrupted measurement (hours, for the solver figure at the full budget) continues where
+    it stopped."""
+    import json
+    import time
+
+    from ilfo.experiments.distances import final_rollouts, mean_over_pairs
+    from ilfo.files import write_json_atomic
+
+    partial = run.run_dir / f".{Path(name).stem}.partial.json"
+    key = _cache_key(run, episodes)
+
+    def compute() -> dict[str, float]:
+        done: dict[str, dict[str, float]] = {}
+        if partial.is_file():
+            kept = json.loads(partial.read_text())
+            if kept.get("key") == key:
+                done = kept["pairs"]
+        rollouts, experts = final_rollouts(run.run_dir, episodes=episodes, experts=episodes)
+        total, start, last_log = len(rollouts) * len(experts), time.monotonic(), time.monotonic()
+        if done and log is not None:
+            log(f"{run.run_dir.name}: {len(done)} of {total} pairs kept from before")
+
+        def keep(pair: str, values: dict[str, float]) -> None:
+            nonlocal last_log
+            done[pair] = values
+            write_json_atomic(partial, {"key": key, "pairs": done})
+            if log is not None and time.monotonic() - last_log >= PROGRESS_LOG_SECONDS:
+                minutes = (time.monotonic() - start) / 60
+                log(f"{run.run_dir.name}: {len(done)} of {total} pairs ({minutes:.0f} min)")
+                last_log = time.monotonic()
+
+        values = mean_over_pairs(rollouts, experts, measure, done=dict(done), on_pair=keep)
+        partial.unlink(missing_ok=True)
+        return values
+
+    return _cached(run, name, episodes, compute, log)
 
 
 def _finished(runs: list[Any]) -> tuple[list[Any], list[str]]:
@@ -463,19 +520,13 @@ def write_distances(
 
     import numpy as np
 
-    from ilfo.experiments.distances import SPACES, run_distances
+    from ilfo.experiments.distances import SPACES, pair_distances
     from ilfo.experiments.paper import paper_cells
 
     runs, unfinished = _finished(runs)
     per_cell: dict[tuple[str, str, int], list[dict[str, float]]] = {}
     for run in runs:
-        values = _cached(
-            run,
-            "distances.json",
-            episodes,
-            lambda run=run: run_distances(run.run_dir, episodes=episodes, experts=episodes),
-            log,
-        )
+        values = _measure_pairs(run, "distances.json", episodes, pair_distances, log)
         per_cell.setdefault((run.env, run.algo, run.num_demos), []).append(values)
     paper = {(c.env, c.algo, c.space): c for c in paper_cells() if c.table == "table3"}
     rows = []
@@ -524,21 +575,13 @@ def write_solvers(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ilfo.experiments.distances import SOLVER_LAMBDAS, final_rollouts, solver_distances
+    from ilfo.experiments.distances import SOLVER_LAMBDAS, solver_costs
     from ilfo.experiments.report import finish_figure
 
     runs, unfinished = _finished(runs)
     rows = []
     for run in runs:
-        values = _cached(
-            run,
-            "solvers.json",
-            episodes,
-            lambda run=run: solver_distances(
-                *final_rollouts(run.run_dir, episodes=episodes, experts=episodes)
-            ),
-            log,
-        )
+        values = _measure_pairs(run, "solvers.json", episodes, solver_costs, log)
         rows.append({"env": run.env, "algo": run.algo, "seed": run.seed, **values})
     csv_path = out / "solvers.csv"
     _write_rows(csv_path, rows)
