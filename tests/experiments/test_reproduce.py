@@ -77,6 +77,29 @@ def test_the_estimate_counts_updates_per_step():
     assert hours("oops-td3", updates_per_step=4) > 2.5 * hours("oops-td3")
 
 
+def test_the_estimate_counts_the_measures_of_final_rollouts():
+    """The solver figure's 100 pairs a run take about as long as a 300k-step run trains."""
+    from ilfo.experiments.reproduce import MEASURE_SECONDS_PER_PAIR
+
+    solvers, table3 = plan("solvers", "small"), plan("table3", "small")
+    assert solvers.measure_hours() == pytest.approx(
+        100 * MEASURE_SECONDS_PER_PAIR["solvers"] / 3600
+    )
+    assert table3.measure_hours() == pytest.approx(
+        table3.runs * 100 * MEASURE_SECONDS_PER_PAIR["distances"] / 3600
+    )
+    trained_only = dataclasses.replace(solvers, measures=())
+    assert solvers.core_hours() == pytest.approx(
+        trained_only.core_hours() + solvers.measure_hours()
+    )
+    assert "of them measuring the final rollouts" in solvers.describe()
+    # Smoke runs' 100-step episodes: pairs a hundredth as long.
+    smoke = plan("solvers", "smoke")
+    assert smoke.measure_hours() == pytest.approx(
+        4 * MEASURE_SECONDS_PER_PAIR["solvers"] / 100 / 3600
+    )
+
+
 def test_table1_smoke_runs_into_a_report(tmp_path, capsys, monkeypatch):
     root = tmp_path / "t1"
     assert main(["reproduce", "table1", "--budget", "smoke", "--dir", str(root),

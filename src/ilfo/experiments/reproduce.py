@@ -99,6 +99,12 @@ updates were 96% of a step). N updates per step cost (1 - share) + share * N tim
 Measured on TD3 and used for every off-policy algo: an algo whose step goes more to its reward
 (oops-adv-td3, opolo) is costed a little high."""
 
+MEASURE_SECONDS_PER_PAIR: dict[str, float] = {"distances": 5.0, "solvers": 45.0}
+"""For the estimate only: one core's seconds per (final rollout, expert trajectory) pair of
+each measure, on Hopper (2026-12-06, beside two training runs): Table 3's three exact solves
+took 1-10 s a pair; the solver figure's nine solves (three Sinkhorn ones to their
+20,000-iteration cap) about 50 s a pair (docs/experiments.md)."""
+
 
 @dataclass(frozen=True)
 class CalibrationPlan:
@@ -138,9 +144,21 @@ class Plan:
         """Training runs (the calibration trains none)."""
         return sum(len(expand(spec)) for spec in self.sweeps.values())
 
-    def core_hours(self) -> float:
-        """Estimated core-hours at the measured rates (``STEPS_PER_CORE_SECOND``)."""
+    def measure_hours(self) -> float:
+        """Estimated core-hours of ``measures`` (``MEASURE_SECONDS_PER_PAIR`` at 1,000-step
+        episodes; a pair's solves scale about as the square of the episodes' length)."""
+        per_pair = sum(MEASURE_SECONDS_PER_PAIR[m] for m in self.measures)
         seconds = 0.0
+        for spec in self.sweeps.values():
+            for run in expand(spec):
+                length = (run.config.get("horizon") or 1000) / 1000
+                seconds += self.measure_episodes**2 * per_pair * length**2
+        return seconds / 3600
+
+    def core_hours(self) -> float:
+        """Estimated core-hours at the measured rates (``STEPS_PER_CORE_SECOND``), the
+        measures included."""
+        seconds = 3600 * self.measure_hours()
         for spec in self.sweeps.values():
             for run in expand(spec):
                 rate = STEPS_PER_CORE_SECOND.get(run.config["algo"], 100.0)
@@ -171,10 +189,18 @@ class Plan:
                 f"{dict(spec.config)}"
             )
         lines += [f"  left out: {line}" for line in self.left_out]
-        hours = self.core_hours()
-        amount = f"{hours:.1f} core-hours" if hours >= 1 else f"{60 * hours:.1f} core-minutes"
-        lines.append(f"  estimated {amount} of compute (rates of docs/benchmarks.md)")
+        measures = ""
+        if self.measures:
+            measures = f", {_amount(self.measure_hours())} of them measuring the final rollouts"
+        lines.append(
+            f"  estimated {_amount(self.core_hours())} of compute{measures} (rates of "
+            "docs/benchmarks.md)"
+        )
         return "\n".join(lines)
+
+
+def _amount(hours: float) -> str:
+    return f"{hours:.1f} core-hours" if hours >= 1 else f"{60 * hours:.1f} core-minutes"
 
 
 def _updates_cost(config: dict[str, Any]) -> float:
