@@ -214,6 +214,11 @@ def test_an_interrupted_measurement_continues_from_its_last_pair(tmp_path, monke
     run.trained_step, before = 2000, len(calls)
     assert _measure_pairs(run, "m.json", 2, measure)["d"] == pytest.approx(expected, rel=1e-12)
     assert len(calls) - before == 6
+    # So are pairs in a damaged file.
+    (tmp_path / ".m.partial.json").write_text('{"key": {"trained_st')
+    run.trained_step, before = 3000, len(calls)
+    assert _measure_pairs(run, "m.json", 2, measure)["d"] == pytest.approx(expected, rel=1e-12)
+    assert len(calls) - before == 6
 
 
 def test_calibration_smoke_and_its_numbers(tmp_path):

@@ -24,9 +24,12 @@ import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from ilfo.experiments.sweep import SweepSpec, expand
+
+if TYPE_CHECKING:
+    from ilfo.experiments.distances import PairMeasure
 
 Budget = Literal["smoke", "small", "full"]
 BUDGETS: tuple[Budget, ...] = ("smoke", "small", "full")
@@ -480,7 +483,7 @@ def _measure_pairs(
     run: Any,
     name: str,
     episodes: int,
-    measure: Any,
+    measure: PairMeasure,
     log: Callable[[str], None] | None = None,
 ) -> dict[str, float]:
     """``measure(rollout, expert)`` averaged over the pairs of a run's final rollouts and its
@@ -499,10 +502,12 @@ def _measure_pairs(
 
     def compute() -> dict[str, float]:
         done: dict[str, dict[str, float]] = {}
-        if partial.is_file():
+        try:
             kept = json.loads(partial.read_text())
             if kept.get("key") == key:
-                done = kept["pairs"]
+                done = dict(kept["pairs"])
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
+            pass  # none kept, or a damaged file: every pair is measured
         rollouts, experts = final_rollouts(run.run_dir, episodes=episodes, experts=episodes)
         total, start, last_log = len(rollouts) * len(experts), time.monotonic(), time.monotonic()
         if done and log is not None:
