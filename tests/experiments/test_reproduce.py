@@ -142,6 +142,12 @@ def test_table1_smoke_runs_into_a_report(tmp_path, capsys, monkeypatch):
     assert f"({paper.mean:.2f})" in distances  # the paper's number beside ilfo's
     cached = json.loads((oops[0].run_dir / "distances.json").read_text())  # cached in the run
     assert cached["key"]["trained_step"] == oops[0].trained_step == oops[0].steps
+    # A run's snapshot (sweeps carried between machines) keeps its measures.
+    from ilfo.training.run_dir import snapshot_run
+
+    carried = snapshot_run(oops[0].run_dir, tmp_path / "carried")
+    for name in ("distances.json", "solvers.json"):
+        assert (carried / name).read_bytes() == (oops[0].run_dir / name).read_bytes()
 
 
 def test_measures_are_cached_per_trained_step_and_skip_unfinished_runs(tmp_path):
@@ -200,6 +206,11 @@ def test_an_interrupted_measurement_continues_from_its_last_pair(tmp_path, monke
     with pytest.raises(KeyboardInterrupt):
         _measure_pairs(run, "m.json", 2, measure)
     assert len(json.loads((tmp_path / ".m.partial.json").read_text())["pairs"]) == 3
+    # A snapshot would carry it: the solver figure's partial file is among the kept files.
+    from ilfo.training.run_dir import SNAPSHOT_FILES, partial_measure_file
+
+    assert partial_measure_file("m.json") == ".m.partial.json"
+    assert ".solvers.partial.json" in SNAPSHOT_FILES
     lines = []
     values = _measure_pairs(run, "m.json", 2, measure, lines.append)
     assert len(calls) == 4 + 3  # the fourth pair again, then the last two; not the first three

@@ -488,7 +488,8 @@ def _measure_pairs(
 ) -> dict[str, float]:
     """``measure(rollout, expert)`` averaged over the pairs of a run's final rollouts and its
     first expert trajectories (``distances.mean_over_pairs``), cached as ``name`` (see
-    ``_cached``). Each pair is kept in ``.<name>.partial.json`` as it is measured, so an
+    ``_cached``). Each pair is kept in ``run_dir.partial_measure_file(name)`` as it is
+    measured (a run's snapshot keeps it, and the finished measure), so an
     interrupted measurement (hours, for the solver figure at the full budget) continues where
     it stopped."""
     import json
@@ -496,8 +497,9 @@ def _measure_pairs(
 
     from ilfo.experiments.distances import final_rollouts, mean_over_pairs
     from ilfo.files import write_json_atomic
+    from ilfo.training.run_dir import partial_measure_file
 
-    partial = run.run_dir / f".{Path(name).stem}.partial.json"
+    partial = run.run_dir / partial_measure_file(name)
     key = _cache_key(run, episodes)
 
     def compute() -> dict[str, float]:

@@ -332,6 +332,16 @@ def load_run_policy(run_dir: str | Path, which: str = "final") -> RunPolicy:
     return RunPolicy(config, env, agent, policy_of(loaded.agent_state), "latest checkpoint", loaded)
 
 
+MEASURE_FILES = ("distances.json", "solvers.json")
+"""Measures of a run's final rollouts that ``ilfo reproduce`` keeps in the run (table3's
+distances, the solver figure's costs: minutes to hours of compute each)."""
+
+
+def partial_measure_file(name: str) -> str:
+    """Where a measure kept as ``name`` keeps its pairs while it is measured."""
+    return f".{Path(name).stem}.partial.json"
+
+
 SNAPSHOT_FILES = (
     CONFIG_FILE,
     DEMOS_RECORD_FILE,
@@ -340,6 +350,8 @@ SNAPSHOT_FILES = (
     BEST_POLICY_FILE,
     BEST_POLICY_INFO,
     "learning_curve.png",
+    *MEASURE_FILES,
+    *(partial_measure_file(name) for name in MEASURE_FILES),
 )
 """What ``snapshot_run`` copies besides the newest checkpoint (each where it exists)."""
 
