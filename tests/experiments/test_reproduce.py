@@ -292,7 +292,7 @@ def test_reproduce_exits_1_and_names_the_runs_given_up(tmp_path, capsys, monkeyp
     fails (it exited 0)."""
     from ilfo.experiments import create_sweep, record_attempt
 
-    def reproduce(name, budget, root, factory, on_change=None):
+    def reproduce(name, budget, root, factory, on_change=None, log=print):
         the_plan = plan(name, budget)
         for sub, spec in the_plan.sweeps.items():
             sweep = create_sweep(root / sub, spec)
