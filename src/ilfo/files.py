@@ -35,19 +35,15 @@ def sync_tree(path: str | Path) -> None:
     """Flush ``path`` to the disk: every file under it, then each directory bottom-up, so that
     a rename of ``path`` made after this survives a power loss with its contents (a rename
     alone can reach the disk before the data it names)."""
-    path = Path(path)
     for root, _, files in os.walk(path, topdown=False):
         for name in files:
-            fd = os.open(os.path.join(root, name), os.O_RDONLY)
-            try:
-                os.fsync(fd)
-            finally:
-                os.close(fd)
+            sync_dir(os.path.join(root, name))  # a file is flushed the same way
         sync_dir(root)
 
 
 def sync_dir(path: str | Path) -> None:
-    """Flush a directory's entries (the names created, renamed or removed in it) to the disk."""
+    """Flush a directory's entries (the names created, renamed or removed in it), or a file's
+    contents, to the disk."""
     fd = os.open(path, os.O_RDONLY)
     try:
         os.fsync(fd)

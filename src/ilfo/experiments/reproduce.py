@@ -507,7 +507,7 @@ def _measure_pairs(
         try:
             kept = json.loads(partial.read_text())
             if kept.get("key") == key:
-                done = dict(kept["pairs"])
+                done = dict(kept["pairs"])  # a TypeError here where the file is damaged
         except (OSError, ValueError, KeyError, TypeError, AttributeError):
             pass  # none kept, or a damaged file: every pair is measured
         rollouts, experts = final_rollouts(run.run_dir, episodes=episodes, experts=episodes)
@@ -524,7 +524,7 @@ def _measure_pairs(
                 log(f"{run.run_dir.name}: {len(done)} of {total} pairs ({minutes:.0f} min)")
                 last_log = time.monotonic()
 
-        values = mean_over_pairs(rollouts, experts, measure, done=dict(done), on_pair=keep)
+        values = mean_over_pairs(rollouts, experts, measure, done=done, on_pair=keep)
         partial.unlink(missing_ok=True)
         return values
 
@@ -555,11 +555,12 @@ def write_distances(
 
     from ilfo.experiments.distances import SPACES, pair_distances
     from ilfo.experiments.paper import paper_cells
+    from ilfo.training.run_dir import DISTANCES_FILE
 
     runs, unfinished = _finished(runs)
     per_cell: dict[tuple[str, str, int], list[dict[str, float]]] = {}
     for run in runs:
-        values = _measure_pairs(run, "distances.json", episodes, pair_distances, log)
+        values = _measure_pairs(run, DISTANCES_FILE, episodes, pair_distances, log)
         per_cell.setdefault((run.env, run.algo, run.num_demos), []).append(values)
     paper = {(c.env, c.algo, c.space): c for c in paper_cells() if c.table == "table3"}
     rows = []
@@ -610,11 +611,12 @@ def write_solvers(
 
     from ilfo.experiments.distances import SOLVER_LAMBDAS, solver_costs
     from ilfo.experiments.report import finish_figure
+    from ilfo.training.run_dir import SOLVERS_FILE
 
     runs, unfinished = _finished(runs)
     rows = []
     for run in runs:
-        values = _measure_pairs(run, "solvers.json", episodes, solver_costs, log)
+        values = _measure_pairs(run, SOLVERS_FILE, episodes, solver_costs, log)
         rows.append({"env": run.env, "algo": run.algo, "seed": run.seed, **values})
     csv_path = out / "solvers.csv"
     _write_rows(csv_path, rows)

@@ -332,7 +332,8 @@ def load_run_policy(run_dir: str | Path, which: str = "final") -> RunPolicy:
     return RunPolicy(config, env, agent, policy_of(loaded.agent_state), "latest checkpoint", loaded)
 
 
-MEASURE_FILES = ("distances.json", "solvers.json")
+DISTANCES_FILE, SOLVERS_FILE = "distances.json", "solvers.json"
+MEASURE_FILES = (DISTANCES_FILE, SOLVERS_FILE)
 """Measures of a run's final rollouts that ``ilfo reproduce`` keeps in the run (table3's
 distances, the solver figure's costs: minutes to hours of compute each)."""
 
