@@ -15,6 +15,7 @@ from ilfo.cli import main
 from ilfo.experiments.paper import paper_cells
 from ilfo.experiments.report import TABLE4_ALGOS
 from ilfo.experiments.reproduce import ABLATIONS, BUDGETS, EXPERIMENTS, TABLE1_ALGOS, plan
+from ilfo.experiments.sweep import expand
 
 
 @pytest.mark.parametrize("name", list(EXPERIMENTS))
@@ -98,6 +99,40 @@ def test_the_estimate_counts_the_measures_of_final_rollouts():
     assert smoke.measure_hours() == pytest.approx(
         4 * MEASURE_SECONDS_PER_PAIR["solvers"] / 100 / 3600
     )
+
+
+def test_the_estimate_left_counts_checkpoints_and_kept_pairs(tmp_path):
+    """What a directory already holds comes off the estimate: a run's steps up to its newest
+    complete checkpoint, and the pairs of a measure kept (all of them once it is written)."""
+    from ilfo.experiments.reproduce import MEASURE_SECONDS_PER_PAIR
+    from ilfo.training.run_dir import CHECKPOINT_FILES, REPLAY_OMITTED, SOLVERS_FILE
+
+    solvers = plan("solvers", "small")
+    ((sub, spec),) = solvers.sweeps.items()
+    (run,) = expand(spec)
+    run_dir = tmp_path / sub / "runs" / run.name
+    assert solvers.core_hours(tmp_path) == pytest.approx(solvers.core_hours())  # nothing yet
+    assert f"{tmp_path}" not in solvers.describe(tmp_path)
+
+    def checkpoint(step, complete=True):
+        path = run_dir / "checkpoints" / f"step_{step:08d}"
+        path.mkdir(parents=True)
+        for name in (*CHECKPOINT_FILES, REPLAY_OMITTED)[: None if complete else 1]:
+            (path / name).write_text("{}")
+
+    checkpoint(100_000)
+    checkpoint(200_000, complete=False)  # a damaged one does not count
+    trained = dataclasses.replace(solvers, measures=())
+    assert trained.core_hours(tmp_path) == pytest.approx(trained.core_hours() * 2 / 3)
+    partial = run_dir / ".solvers.partial.json"
+    partial.write_text(json.dumps({"key": {}, "pairs": {str(i): {} for i in range(40)}}))
+    per_pair = MEASURE_SECONDS_PER_PAIR["solvers"] / 3600
+    assert solvers.measure_hours(tmp_path) == pytest.approx(60 * per_pair)
+    assert "left: " in solvers.describe(tmp_path)
+    partial.write_text("{damaged")
+    assert solvers.measure_hours(tmp_path) == pytest.approx(100 * per_pair)
+    (run_dir / SOLVERS_FILE).write_text("{}")
+    assert solvers.measure_hours(tmp_path) == 0
 
 
 def test_table1_smoke_runs_into_a_report(tmp_path, capsys, monkeypatch):

@@ -388,10 +388,10 @@ def _run_reproduce(args: argparse.Namespace) -> int:
     from ilfo.experiments.reproduce import plan, reproduce
 
     the_plan = plan(args.name, args.budget)
-    print(the_plan.describe())
+    root = Path(args.dir or f"reproduce/{args.name}-{args.budget}")
+    print(the_plan.describe(root))
     if args.dry_run:
         return 0
-    root = Path(args.dir or f"reproduce/{args.name}-{args.budget}")
     factory = _backend_factory(args)
     display = _Progress([], enabled=not args.no_progress)
     try:

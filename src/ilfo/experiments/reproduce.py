@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
-from ilfo.experiments.sweep import SweepSpec, expand
+from ilfo.experiments.sweep import RUNS_DIR, SweepSpec, expand
 
 if TYPE_CHECKING:
     from ilfo.experiments.distances import PairMeasure
@@ -147,35 +147,49 @@ class Plan:
         """Training runs (the calibration trains none)."""
         return sum(len(expand(spec)) for spec in self.sweeps.values())
 
-    def measure_hours(self) -> float:
+    def measure_hours(self, root: Path | None = None) -> float:
         """Estimated core-hours of ``measures`` (``MEASURE_SECONDS_PER_PAIR`` at 1,000-step
-        episodes; a pair's solves scale about as the square of the episodes' length)."""
-        per_pair = sum(MEASURE_SECONDS_PER_PAIR[m] for m in self.measures)
+        episodes; a pair's solves scale about as the square of the episodes' length). With
+        ``root``, the experiment's directory, only the pairs its runs have not kept."""
         seconds = 0.0
-        for spec in self.sweeps.values():
+        for sub, spec in self.sweeps.items():
             for run in expand(spec):
                 length = (run.config.get("horizon") or 1000) / 1000
-                seconds += self.measure_episodes**2 * per_pair * length**2
+                for measure in self.measures:
+                    pairs = self.measure_episodes**2
+                    if root is not None:
+                        pairs -= _pairs_kept(root / sub / RUNS_DIR / run.name, measure, pairs)
+                    seconds += pairs * MEASURE_SECONDS_PER_PAIR[measure] * length**2
         return seconds / 3600
 
-    def core_hours(self) -> float:
+    def core_hours(self, root: Path | None = None) -> float:
         """Estimated core-hours at the measured rates (``STEPS_PER_CORE_SECOND``), the
-        measures included."""
-        seconds = 3600 * self.measure_hours()
-        for spec in self.sweeps.values():
+        measures included. With ``root``, the experiment's directory, only what is left: the
+        steps past each run's newest checkpoint (what a resume continues from) and the
+        measures' pairs not kept."""
+        from ilfo.training.run_dir import checkpoint_steps
+
+        seconds = 3600 * self.measure_hours(root)
+        for sub, spec in self.sweeps.items():
             for run in expand(spec):
                 rate = STEPS_PER_CORE_SECOND.get(run.config["algo"], 100.0)
                 if run.config.get("preset") == "paper" and _preset_changes_agent(
                     run.config["algo"]
                 ):
                     rate /= 3
-                seconds += run.steps / rate * _updates_cost(run.config)
+                steps = run.steps
+                if root is not None:
+                    kept = checkpoint_steps(root / sub / RUNS_DIR / run.name)
+                    steps -= min(kept[-1][0], run.steps) if kept else 0
+                seconds += steps / rate * _updates_cost(run.config)
         if self.calibration is not None:  # ~1,500 env + policy steps/s and ~0.1 s per solve
             cal = self.calibration
             seconds += cal.rollouts * ((cal.horizon or 1000) / 1500 + 0.1)
         return seconds / 3600
 
-    def describe(self) -> str:
+    def describe(self, root: Path | None = None) -> str:
+        """The plan in a few lines; with ``root``, the experiment's directory, also what of
+        the estimate is left there."""
         lines = [f"{self.name} at the {self.budget} budget: {self.runs} training runs"]
         if self.calibration is not None:
             cal = self.calibration
@@ -199,11 +213,33 @@ class Plan:
             f"  estimated {_amount(self.core_hours())} of compute{measures} (rates of "
             "docs/benchmarks.md)"
         )
+        if root is not None and self.calibration is None:
+            left = self.core_hours(root)
+            if left < self.core_hours():
+                lines.append(f"  {_amount(left)} of it left: {root} holds the rest")
         return "\n".join(lines)
 
 
 def _amount(hours: float) -> str:
     return f"{hours:.1f} core-hours" if hours >= 1 else f"{60 * hours:.1f} core-minutes"
+
+
+def _pairs_kept(run_dir: Path, measure: str, total: int) -> int:
+    """How many of a run's ``total`` pairs of ``measure`` its directory keeps: all where the
+    measure is written, else those of its partial file (0 where that is damaged)."""
+    import json
+
+    from ilfo.training.run_dir import DISTANCES_FILE, SOLVERS_FILE, partial_measure_file
+
+    name = {"distances": DISTANCES_FILE, "solvers": SOLVERS_FILE}[measure]
+    if (run_dir / name).is_file():
+        return total
+    try:
+        return min(
+            total, len(json.loads((run_dir / partial_measure_file(name)).read_text())["pairs"])
+        )
+    except (OSError, ValueError, KeyError, TypeError):
+        return 0
 
 
 def _updates_cost(config: dict[str, Any]) -> float:
