@@ -294,8 +294,8 @@ def test_a_checkpoint_is_on_the_disk_before_its_rename_and_before_older_ones_go(
     tmp_path, monkeypatch
 ):
     """A power loss must not leave the new checkpoint's name with empty files and no older
-    checkpoint: its files and directory are flushed, then renamed, then the rename flushed,
-    and only then is the older checkpoint removed."""
+    checkpoint: its files and directory (and metrics.csv) are flushed, then renamed, then the
+    rename flushed, and only then is the older checkpoint removed."""
     import shutil
 
     events = []
@@ -326,6 +326,8 @@ def test_a_checkpoint_is_on_the_disk_before_its_rename_and_before_older_ones_go(
     files = {str(tmp / p.relative_to(final)) for p in final.rglob("*")}
     assert files and files | {str(tmp)} <= synced_before
     assert ("fsync", str(root)) in events[rename:removal]
+    # metrics.csv too: resume drops rows past the checkpoint, and would never log lost ones.
+    assert str(run / "metrics.csv") in synced_before
 
 
 def test_a_full_disk_during_a_checkpoint_is_one_line_and_keeps_what_was_written(

@@ -414,6 +414,8 @@ def test_cli_flags_of_another_algo_are_a_clear_error(capsys):
     assert "Traceback" not in err
     assert main(["train", "--algo", "sac", "--oops-reg", "0.1", "--no-progress"]) == 2
     assert "oops settings (--oops-* flags) do not apply to algo 'sac'" in capsys.readouterr().err
+    assert main(["train", "--oops-adv-critic-lr", "0.001", "--demos", DEMOS, "--no-progress"]) == 2
+    assert "(--oops-adv-* flags) do not apply" in capsys.readouterr().err  # the flags' spelling
     assert main(["train", "--oops-reg", "-1", "--demos", DEMOS, "--no-progress"]) == 2
     assert "reg must be positive" in capsys.readouterr().err
 

@@ -131,7 +131,9 @@ def test_the_estimate_left_counts_checkpoints_and_kept_pairs(tmp_path):
     assert "left: " in solvers.describe(tmp_path)
     partial.write_text("{damaged")
     assert solvers.measure_hours(tmp_path) == pytest.approx(100 * per_pair)
-    (run_dir / SOLVERS_FILE).write_text("{}")
+    (run_dir / SOLVERS_FILE).write_text("")  # damaged: measured again
+    assert solvers.measure_hours(tmp_path) == pytest.approx(100 * per_pair)
+    (run_dir / SOLVERS_FILE).write_text(json.dumps({"key": {}, "values": {}}))
     assert solvers.measure_hours(tmp_path) == 0
 
 
@@ -209,6 +211,10 @@ def test_measures_are_cached_per_trained_step_and_skip_unfinished_runs(tmp_path)
     assert _cached(run, "d.json", 5, compute) == {"s": 2.0}  # other episodes
     run.trained_step = 2000
     assert _cached(run, "d.json", 5, compute) == {"s": 3.0}  # trained on since
+    for damaged in ("", "[1, 2]", '{"key": {"trained_step": 2000, "episodes": 5}}'):
+        (tmp_path / "d.json").write_text(damaged)  # a power loss, a hand edit: measured again
+        assert _cached(run, "d.json", 5, compute) == {"s": float(len(calls))}
+    assert len(calls) == 6
     unfinished = SimpleNamespace(run_dir=tmp_path / "Hopper-v5__oops-td3__0", finished=False)
     (out := tmp_path / "out").mkdir()
     write_distances([unfinished], out)
@@ -265,6 +271,23 @@ def test_an_interrupted_measurement_continues_from_its_last_pair(tmp_path, monke
     run.trained_step, before = 3000, len(calls)
     assert _measure_pairs(run, "m.json", 2, measure)["d"] == pytest.approx(expected, rel=1e-12)
     assert len(calls) - before == 6
+    # Stopped after its last pair, before the finished measure is written: no pair is lost.
+    from ilfo import files
+
+    write = files.write_json_atomic
+
+    def stop_at_the_finished_measure(path, value):
+        if path.name == "m.json":
+            raise KeyboardInterrupt
+        write(path, value)
+
+    monkeypatch.setattr(files, "write_json_atomic", stop_at_the_finished_measure)
+    run.trained_step, before = 4000, len(calls)
+    with pytest.raises(KeyboardInterrupt):
+        _measure_pairs(run, "m.json", 2, measure)
+    monkeypatch.setattr(files, "write_json_atomic", write)
+    assert _measure_pairs(run, "m.json", 2, measure)["d"] == pytest.approx(expected, rel=1e-12)
+    assert len(calls) - before == 6 and not (tmp_path / ".m.partial.json").exists()
 
 
 def test_calibration_smoke_and_its_numbers(tmp_path):

@@ -611,6 +611,17 @@ def test_a_run_cut_short_by_hand_is_trained_to_the_manifests_budget(tmp_path, mo
         (sweep.run_dir(run.name) / "config.json").write_text(json.dumps({"steps": written}))
         train_run(sweep.run_dir(run.name), run.config)
     assert asked == [400, None]  # 800: its own budget, as written
+    # Killed after its last checkpoint, whose last episode went past the budget (step 412),
+    # before its final policy: resumed as written, not with the checkpoint's step as a budget.
+    from ilfo.training.run_dir import CHECKPOINT_FILES, REPLAY_FILE
+
+    checkpoint = sweep.run_dir(run.name) / "checkpoints" / "step_00000412"
+    checkpoint.mkdir(parents=True)
+    for name in (*CHECKPOINT_FILES, REPLAY_FILE):
+        (checkpoint / name).write_text("{}")
+    (sweep.run_dir(run.name) / "config.json").write_text(json.dumps({"steps": 400}))
+    train_run(sweep.run_dir(run.name), run.config)
+    assert asked[-1] is None
 
 
 def test_an_attempt_record_after_a_torn_line_is_kept(tmp_path):

@@ -178,7 +178,8 @@ def write_calibration(results: dict[str, list[CalibrationPoint]], out: Path) -> 
         "environment); the many poor policies that tie near the floor of both returns pull "
         "the ranks down more than r. "
         "Ant-v5 and Humanoid-v5: OOPS scores the states without their contact forces, as "
-        "imitation observes them by default (the expert acts on all of them).",
+        "imitation observes them by default (the expert acts on the columns it was trained "
+        "on, with or without them).",
         "",
     ]
     for env, points in results.items():

@@ -226,20 +226,17 @@ def _amount(hours: float) -> str:
 
 def _pairs_kept(run_dir: Path, measure: str, total: int) -> int:
     """How many of a run's ``total`` pairs of ``measure`` its directory keeps: all where the
-    measure is written, else those of its partial file (0 where that is damaged)."""
-    import json
-
+    measure is written, else those of its partial file (0 where that is damaged). For the
+    estimate only: a measure of an earlier final policy is counted, though measured again."""
     from ilfo.training.run_dir import DISTANCES_FILE, SOLVERS_FILE, partial_measure_file
 
     name = {"distances": DISTANCES_FILE, "solvers": SOLVERS_FILE}[measure]
-    if (run_dir / name).is_file():
+    finished = _read_kept(run_dir / name)
+    if finished is not None and isinstance(finished.get("values"), dict):
         return total
-    try:
-        return min(
-            total, len(json.loads((run_dir / partial_measure_file(name)).read_text())["pairs"])
-        )
-    except (OSError, ValueError, KeyError, TypeError):
-        return 0
+    partial = _read_kept(run_dir / partial_measure_file(name))
+    pairs = None if partial is None else partial.get("pairs")
+    return min(total, len(pairs)) if isinstance(pairs, dict) else 0
 
 
 def _updates_cost(config: dict[str, Any]) -> float:
@@ -482,17 +479,16 @@ def _cached(
     """``compute()``'s values for a run, kept in its directory as ``name``: computed again only
     where the run trained on since (its last step) or other ``episodes`` are asked for.
     ``log`` gets a line before and after a computation (not for a value kept from before)."""
-    import json
     import time
 
     from ilfo.files import write_json_atomic
+    from ilfo.training.run_dir import partial_measure_file
 
     cache = run.run_dir / name
     key = _cache_key(run, episodes)
-    if cache.is_file():
-        kept = json.loads(cache.read_text())
-        if kept.get("key") == key:
-            return kept["values"]
+    kept = _read_kept(cache)
+    if kept is not None and kept.get("key") == key and isinstance(kept.get("values"), dict):
+        return kept["values"]
     if log is not None:
         log(
             f"{run.run_dir.name}: measuring {Path(name).stem}, {episodes} final rollouts against "
@@ -501,9 +497,23 @@ def _cached(
     start = time.monotonic()
     values = compute()
     write_json_atomic(cache, {"key": key, "values": values})
+    (run.run_dir / partial_measure_file(name)).unlink(missing_ok=True)  # only once it is kept
     if log is not None:
         log(f"{run.run_dir.name}: {Path(name).stem} measured in {time.monotonic() - start:.0f} s")
     return values
+
+
+def _read_kept(path: Path) -> dict[str, Any] | None:
+    """A kept measure's JSON object (finished, or its partial pairs); None where there is none
+    or it is damaged (a power loss, a hand edit): measured again rather than a crash at every
+    start."""
+    import json
+
+    try:
+        kept = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return kept if isinstance(kept, dict) else None
 
 
 def _cache_key(run: Any, episodes: int) -> dict[str, int]:
@@ -528,7 +538,6 @@ def _measure_pairs(
     measured (a run's snapshot keeps it, and the finished measure), so an
     interrupted measurement (hours, for the solver figure at the full budget) continues where
     it stopped."""
-    import json
     import time
 
     from ilfo.experiments.distances import final_rollouts, mean_over_pairs
@@ -539,13 +548,10 @@ def _measure_pairs(
     key = _cache_key(run, episodes)
 
     def compute() -> dict[str, float]:
+        kept = _read_kept(partial)  # None where there is none, or it is damaged
         done: dict[str, dict[str, float]] = {}
-        try:
-            kept = json.loads(partial.read_text())
-            if kept.get("key") == key:
-                done = dict(kept["pairs"])  # a TypeError here where the file is damaged
-        except (OSError, ValueError, KeyError, TypeError, AttributeError):
-            pass  # none kept, or a damaged file: every pair is measured
+        if kept is not None and kept.get("key") == key and isinstance(kept.get("pairs"), dict):
+            done = dict(kept["pairs"])
         rollouts, experts = final_rollouts(run.run_dir, episodes=episodes, experts=episodes)
         total, start, last_log = len(rollouts) * len(experts), time.monotonic(), time.monotonic()
         if done and log is not None:
@@ -560,9 +566,7 @@ def _measure_pairs(
                 log(f"{run.run_dir.name}: {len(done)} of {total} pairs ({minutes:.0f} min)")
                 last_log = time.monotonic()
 
-        values = mean_over_pairs(rollouts, experts, measure, done=done, on_pair=keep)
-        partial.unlink(missing_ok=True)
-        return values
+        return mean_over_pairs(rollouts, experts, measure, done=done, on_pair=keep)
 
     return _cached(run, name, episodes, compute, log)
 

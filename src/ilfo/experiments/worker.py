@@ -6,7 +6,8 @@ CPUs the process may use) and the BLAS/OpenMP thread counts in the environment. 
 run, or resumes it from its newest checkpoint, and records the attempt's start (with the
 pinning it got) and its end (done, interrupted, or the error) in ``attempts/NAME.jsonl``.
 
-Exit status: 0 done, 130 interrupted (SIGINT: the run checkpointed first), 1 failed.
+Exit status: 0 done, 130 interrupted (SIGINT: the run checkpointed first), 1 failed, 75
+(``EXIT_BUSY``) another process holds the run's lock.
 """
 
 from __future__ import annotations
@@ -120,12 +121,14 @@ def train_run(run_dir: os.PathLike[str] | str, config: Mapping[str, object]) -> 
         # The manifest's budget at least: a run cut short by hand (`ilfo train --resume --steps`)
         # would otherwise end below it at every start, never done, requeued forever.
         written = int(read_run_config(run_dir)["steps"])
-        steps = [step for step, _ in checkpoint_steps(run_dir)]
-        budget = max(written, int(config["steps"]), *steps)  # type: ignore[call-overload]
+        budget = max(written, int(config["steps"]))  # type: ignore[call-overload]
+        # A last episode may have run past the budget (episodes end whole): such a checkpoint
+        # needs no new budget, and would otherwise write its step into config.json as one.
+        newest = max([step for step, _ in checkpoint_steps(run_dir)], default=0)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # "no complete checkpoint yet": expected here
             trainer = Trainer.resume(
-                run_dir, progress=False, steps=budget if budget > written else None
+                run_dir, progress=False, steps=budget if budget > max(written, newest) else None
             )
     else:
         trainer = Trainer(config_from_dict(dict(config), run_dir), run_dir, progress=False)

@@ -133,7 +133,8 @@ class TrainConfig:
             if getattr(self, name) is not None and name not in (algo.agent, algo.reward):
                 rewarder = f"the {algo.reward.upper()}" if algo.reward else "no"
                 raise ValueError(
-                    f"{name} settings (--{name}-* flags) do not apply to algo {self.algo!r}, "
+                    f"{name} settings (--{name.replace('_', '-')}-* flags) do not apply to "
+                    f"algo {self.algo!r}, "
                     f"which uses the {algo.agent.upper()} agent and {rewarder} rewarder; "
                     f"{name} is for {', '.join(algos_using(name))}"
                 )

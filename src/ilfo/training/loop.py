@@ -513,8 +513,8 @@ class Trainer:
     # ------------------------------------------------------------------ files and resume
     def save_checkpoint(self) -> Path:
         """Write the run's whole state at this episode boundary (``checkpoint.save_checkpoint``:
-        atomic; a kill at any moment leaves a complete checkpoint). The metrics are flushed
-        first, so that TensorBoard's events hold every row up to it, as metrics.csv does."""
+        atomic; a kill at any moment leaves a complete checkpoint). The metrics are flushed to
+        the disk first, so that metrics.csv and TensorBoard's events hold every row up to it."""
         if self._metrics is not None:
             self._metrics.flush()
         reward_state = None if self.rewarder is None else _reward_state(self.rewarder)

@@ -59,9 +59,15 @@ class MetricsLog:
             writer.writerow({k: row.get(k, "") for k in METRIC_FIELDS})
 
     def flush(self) -> None:
-        """Write the TensorBoard events logged so far to disk (the CSV is closed per row)."""
+        """Write the TensorBoard events logged so far to disk, and flush metrics.csv (closed per
+        row) to the disk, so that a checkpoint saved after this survives a power loss with
+        every row up to its step (resume never logs them again)."""
+        from ilfo.files import sync_dir
+
         if self._tb is not None:
             self._tb.flush()
+        if self.path.exists():
+            sync_dir(self.path)
 
     def close(self) -> None:
         """Flush and close the events file."""
