@@ -543,6 +543,16 @@ def test_local_workers_pass_over_cpus_another_process_holds(tmp_path):
     all_held = LocalBackend(workers=len(cpus))
     record_attempt(sweep, second, "start", pid=os.getpid(), cpus=cpus)
     assert all_held.cpu_set(sweep, 1) == cpus[1:2]  # too few free: the slot's own share
+    # Another process holds every CPU but slot 1's share, which slot 0 takes: slot 1 shares
+    # a CPU of the other process's (free once its worker ends), not its own slot 0's.
+    from types import SimpleNamespace
+
+    two = LocalBackend(workers=2)
+    record_attempt(sweep, second, "start", pid=os.getpid(), cpus=[cpus[0], *cpus[2:]])
+    assert two.cpu_set(sweep, 0) == cpus[1:2]
+    live = SimpleNamespace(poll=lambda: None, process=SimpleNamespace(pid=-1))
+    two._jobs[0] = live  # type: ignore[assignment]
+    assert two.cpu_set(sweep, 1) == cpus[:1]
 
 
 def test_a_queued_run_another_process_started_is_waited_for_not_started(tmp_path):

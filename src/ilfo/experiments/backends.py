@@ -143,16 +143,24 @@ class LocalBackend:
     def cpu_set(self, sweep: Sweep, slot: int) -> list[int] | None:
         """The CPUs for a new worker in ``slot``: the first ``cores_per_run`` of this process's
         CPUs that neither its other slots nor another process's live workers on the sweep
-        hold; the slot's own share where that leaves too few."""
+        hold. Where that leaves too few (more workers than CPUs), the slot's own share, unless
+        another of its live slots holds it now: then CPUs that only other processes' workers
+        hold, which come free when those end, rather than doubling up on its own."""
         if self.cpus is None:
             return None
         ours = {slot_ for slot_, job in self._jobs.items() if job.poll() is None}
         taken = cpus_of_live_workers(sweep, {self._jobs[s].process.pid for s in ours})
+        held_by_ours: set[int] = set()
         for other in ours - {slot}:
-            taken.update(self.cpu_sets[other] or ())
-        free = [c for c in self.cpus if c not in taken]
+            held_by_ours.update(self.cpu_sets[other] or ())
+        free = [c for c in self.cpus if c not in taken | held_by_ours]
         if len(free) < self.cores_per_run:
-            return self.cpu_sets[slot]
+            own = self.cpu_sets[slot]
+            if own is None or not held_by_ours & set(own):
+                return own
+            free += [c for c in self.cpus if c not in held_by_ours and c not in free]
+            if len(free) < self.cores_per_run:
+                return own
         self.cpu_sets[slot] = free[: self.cores_per_run]
         return self.cpu_sets[slot]
 
