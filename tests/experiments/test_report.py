@@ -405,12 +405,13 @@ def test_report_reads_sweep_variants_and_percent_differences(tmp_path):
 
 
 def test_table4_algos_are_compared_with_oops_td3(tmp_path):
-    for name, algo, final in (
-        ("o", "oops-td3", 0.8),
-        ("a", "oops-adv-td3", 0.6),
-        ("s", "sil", 0.2),
+    for name, algo, final, steps in (
+        ("o", "oops-td3", 0.8, None),
+        ("a", "oops-adv-td3", 0.6, 3000),  # unfinished: 2,000 of its 3,000 steps
+        ("s", "sil", 0.2, None),
     ):
-        _fake_run(tmp_path, name, env="Hopper-v5", algo=algo, seed=0, scores=[0.1, final])
+        _fake_run(tmp_path, name, env="Hopper-v5", algo=algo, seed=0, scores=[0.1, final],
+                  steps=steps)  # fmt: skip
     _fake_run(tmp_path, "p", env="Hopper-v5", algo="pwil-td3", seed=0, scores=[0.5])
     report = build_report(collect_runs([tmp_path])[0], resamples=200)
     adv = report.cell("Hopper-v5", "oops-adv-td3", 1)
@@ -422,4 +423,5 @@ def test_table4_algos_are_compared_with_oops_td3(tmp_path):
     write_report(report, tmp_path / "report", sources=[str(tmp_path)])
     text = (tmp_path / "report" / "report.md").read_text()
     paper = paper_ablation("Hopper-v5", "oops_adv")
-    assert f"| Hopper-v5 | oops-adv-td3 | 1 | oops_adv | -25.0 | {paper.text} |" in text
+    seeds = "1 (1 unfinished, from step 2,000); 1"  # its own; OOPS+TD3's
+    assert f"| Hopper-v5 | oops-adv-td3 | 1 | oops_adv | {seeds} | -25.0 | {paper.text} |" in text

@@ -692,8 +692,12 @@ def write_report(report: Report, out: str | Path, *, sources: Sequence[str] = ()
             "",
             "## Variants (percent difference of the mean from the default run, as Table 4)",
             "",
-            "| task | algo | demos | variant | ilfo % | paper % (10 demos) | trained otherwise |",
-            "|---|---|---|---|---|---|---|",
+            "Seeds: this cell's; the default's (an unfinished run counts with its last "
+            "evaluation so far).",
+            "",
+            "| task | algo | demos | variant | seeds | ilfo % | paper % (10 demos) "
+            "| trained otherwise |",
+            "|---|---|---|---|---|---|---|---|",
         ]
         for c, diff in variants:
             variant = c.variant or TABLE4_ALGOS[c.algo]
@@ -706,9 +710,10 @@ def write_report(report: Report, out: str | Path, *, sources: Sequence[str] = ()
                 else f"this: {c.settings_text or 'defaults'}; "
                 f"{base.algo}: {base.settings_text or 'defaults'}"
             )
+            seeds = _seeds_text(c) + ("" if base is None else f"; {_seeds_text(base)}")
             lines.append(
-                f"| {c.env} | {c.algo} | {c.num_demos} | {variant} | {_fmt(diff, 1)} | {paper} "
-                f"| {otherwise} |"
+                f"| {c.env} | {c.algo} | {c.num_demos} | {variant} | {seeds} | {_fmt(diff, 1)} "
+                f"| {paper} | {otherwise} |"
             )
     lines += [
         "",
