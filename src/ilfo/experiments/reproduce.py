@@ -209,13 +209,13 @@ class Plan:
         measures = ""
         if self.measures:
             measures = f", {_amount(self.measure_hours())} of them measuring the final rollouts"
+        total = self.core_hours()
         lines.append(
-            f"  estimated {_amount(self.core_hours())} of compute{measures} (rates of "
-            "docs/benchmarks.md)"
+            f"  estimated {_amount(total)} of compute{measures} (rates of docs/benchmarks.md)"
         )
         if root is not None and self.calibration is None:
             left = self.core_hours(root)
-            if left < self.core_hours():
+            if left < total:
                 lines.append(f"  {_amount(left)} of it left: {root} holds the rest")
         return "\n".join(lines)
 
@@ -231,12 +231,10 @@ def _pairs_kept(run_dir: Path, measure: str, total: int) -> int:
     from ilfo.training.run_dir import DISTANCES_FILE, SOLVERS_FILE, partial_measure_file
 
     name = {"distances": DISTANCES_FILE, "solvers": SOLVERS_FILE}[measure]
-    finished = _read_kept(run_dir / name)
-    if finished is not None and isinstance(finished.get("values"), dict):
+    if _read_kept(run_dir / name, "values") is not None:
         return total
-    partial = _read_kept(run_dir / partial_measure_file(name))
-    pairs = None if partial is None else partial.get("pairs")
-    return min(total, len(pairs)) if isinstance(pairs, dict) else 0
+    partial = _read_kept(run_dir / partial_measure_file(name), "pairs")
+    return 0 if partial is None else min(total, len(partial[1]))
 
 
 def _updates_cost(config: dict[str, Any]) -> float:
@@ -482,13 +480,12 @@ def _cached(
     import time
 
     from ilfo.files import write_json_atomic
-    from ilfo.training.run_dir import partial_measure_file
 
     cache = run.run_dir / name
     key = _cache_key(run, episodes)
-    kept = _read_kept(cache)
-    if kept is not None and kept.get("key") == key and isinstance(kept.get("values"), dict):
-        return kept["values"]
+    kept = _read_kept(cache, "values")
+    if kept is not None and kept[0] == key:
+        return kept[1]
     if log is not None:
         log(
             f"{run.run_dir.name}: measuring {Path(name).stem}, {episodes} final rollouts against "
@@ -497,23 +494,24 @@ def _cached(
     start = time.monotonic()
     values = compute()
     write_json_atomic(cache, {"key": key, "values": values})
-    (run.run_dir / partial_measure_file(name)).unlink(missing_ok=True)  # only once it is kept
     if log is not None:
         log(f"{run.run_dir.name}: {Path(name).stem} measured in {time.monotonic() - start:.0f} s")
     return values
 
 
-def _read_kept(path: Path) -> dict[str, Any] | None:
-    """A kept measure's JSON object (finished, or its partial pairs); None where there is none
-    or it is damaged (a power loss, a hand edit): measured again rather than a crash at every
-    start."""
+def _read_kept(path: Path, part: str) -> tuple[Any, dict[str, Any]] | None:
+    """A kept measure's key and its ``part`` (``values`` of a finished one, ``pairs`` of a
+    partial one); None where there is none or it is damaged (a power loss, a hand edit):
+    measured again rather than a crash at every start."""
     import json
 
     try:
         kept = json.loads(path.read_text())
     except (OSError, ValueError):
         return None
-    return kept if isinstance(kept, dict) else None
+    if not isinstance(kept, dict) or not isinstance(kept.get(part), dict):
+        return None
+    return kept.get("key"), kept[part]
 
 
 def _cache_key(run: Any, episodes: int) -> dict[str, int]:
@@ -548,10 +546,8 @@ def _measure_pairs(
     key = _cache_key(run, episodes)
 
     def compute() -> dict[str, float]:
-        kept = _read_kept(partial)  # None where there is none, or it is damaged
-        done: dict[str, dict[str, float]] = {}
-        if kept is not None and kept.get("key") == key and isinstance(kept.get("pairs"), dict):
-            done = dict(kept["pairs"])
+        kept = _read_kept(partial, "pairs")  # None where there is none, or it is damaged
+        done: dict[str, dict[str, float]] = dict(kept[1]) if kept and kept[0] == key else {}
         rollouts, experts = final_rollouts(run.run_dir, episodes=episodes, experts=episodes)
         total, start, last_log = len(rollouts) * len(experts), time.monotonic(), time.monotonic()
         if done and log is not None:
@@ -568,7 +564,9 @@ def _measure_pairs(
 
         return mean_over_pairs(rollouts, experts, measure, done=done, on_pair=keep)
 
-    return _cached(run, name, episodes, compute, log)
+    values = _cached(run, name, episodes, compute, log)
+    partial.unlink(missing_ok=True)  # only once the finished measure is kept
+    return values
 
 
 def _finished(runs: list[Any]) -> tuple[list[Any], list[str]]:
