@@ -290,6 +290,45 @@ def test_an_interrupted_measurement_continues_from_its_last_pair(tmp_path, monke
     assert len(calls) - before == 6 and not (tmp_path / ".m.partial.json").exists()
 
 
+def test_pairs_of_other_rollouts_of_the_same_policy_are_measured_again(tmp_path, monkeypatch):
+    """Continued on another machine, the same final policy can roll out a little differently
+    (the last bits of its floats): the kept pairs are of other trajectories, so a mean mixing
+    them would mix two measurements."""
+    from types import SimpleNamespace
+
+    from ilfo.experiments import distances
+    from ilfo.experiments.reproduce import _measure_pairs
+
+    rng = np.random.default_rng(1)
+    trajectories = [
+        distances.Trajectory(rng.normal(size=(6, 2)), rng.normal(size=(5, 1))) for _ in range(4)
+    ]
+    rollouts, experts = trajectories[:2], trajectories[2:]
+    shown = {"rollouts": rollouts}
+    monkeypatch.setattr(distances, "final_rollouts", lambda *a, **k: (shown["rollouts"], experts))
+    calls = []
+
+    def measure(rollout, expert):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return {"d": distances.wasserstein(rollout.observations, expert.observations)}
+
+    run = SimpleNamespace(run_dir=tmp_path, trained_step=1000)
+    with pytest.raises(KeyboardInterrupt):
+        _measure_pairs(run, "m.json", 2, measure)
+    nudged = rollouts[0].observations.copy()
+    nudged[0, 0] = np.nextafter(nudged[0, 0], np.inf)  # one float, one ulp
+    shown["rollouts"] = [distances.Trajectory(nudged, rollouts[0].actions), rollouts[1]]
+    assert distances.trajectories_digest(shown["rollouts"]) != distances.trajectories_digest(
+        rollouts
+    )
+    lines, before = [], len(calls)
+    _measure_pairs(run, "m.json", 2, measure, lines.append)
+    assert len(calls) - before == 4  # every pair again, not the two kept
+    assert "2 pairs kept from before are of another final policy or other rollouts" in lines[1]
+
+
 def test_calibration_smoke_and_its_numbers(tmp_path):
     """The calibration's smoke budget: the expert, its noisy versions, zero and random actions;
     the expert's proxy return is the highest, the noisier the lower (measured: -172, -196,

@@ -148,6 +148,20 @@ def final_rollouts(
     return rollouts, expert_trajectories
 
 
+def trajectories_digest(trajectories: Sequence[Trajectory]) -> str:
+    """A fingerprint of trajectories' exact floats (SHA-256 of their observations and actions,
+    in order): two rollouts of one policy on different CPUs can differ in the last bits."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    for t in trajectories:
+        for array in (t.observations, t.actions):
+            a = np.ascontiguousarray(array)
+            digest.update(f"{a.dtype.str}{a.shape}".encode())
+            digest.update(a.tobytes())
+    return digest.hexdigest()
+
+
 SOLVER_LAMBDAS: tuple[float, ...] = (0.001, 0.005, 0.01, 0.05, 0.1, 0.5, 1.0)
 """The paper's solver figure's range of the Sinkhorn lambda (0.001 to 1)."""
 

@@ -535,23 +535,30 @@ def _measure_pairs(
     ``_cached``). Each pair is kept in ``run_dir.partial_measure_file(name)`` as it is
     measured (a run's snapshot keeps it, and the finished measure), so an
     interrupted measurement (hours, for the solver figure at the full budget) continues where
-    it stopped."""
+    it stopped: on the same rollouts, to the last bit, or from the start."""
     import time
 
-    from ilfo.experiments.distances import final_rollouts, mean_over_pairs
+    from ilfo.experiments.distances import final_rollouts, mean_over_pairs, trajectories_digest
     from ilfo.files import write_json_atomic
     from ilfo.training.run_dir import partial_measure_file
 
     partial = run.run_dir / partial_measure_file(name)
-    key = _cache_key(run, episodes)
 
     def compute() -> dict[str, float]:
+        rollouts, experts = final_rollouts(run.run_dir, episodes=episodes, experts=episodes)
+        # Pairs are kept for these very rollouts: a measurement continued on another machine,
+        # whose floats roll the same policy out a little differently, starts again.
+        key = {**_cache_key(run, episodes), "trajectories": trajectories_digest(rollouts + experts)}
         kept = _read_kept(partial, "pairs")  # None where there is none, or it is damaged
         done: dict[str, dict[str, float]] = dict(kept[1]) if kept and kept[0] == key else {}
-        rollouts, experts = final_rollouts(run.run_dir, episodes=episodes, experts=episodes)
         total, start, last_log = len(rollouts) * len(experts), time.monotonic(), time.monotonic()
-        if done and log is not None:
+        if log is not None and done:
             log(f"{run.run_dir.name}: {len(done)} of {total} pairs kept from before")
+        elif log is not None and kept and kept[1]:
+            log(
+                f"{run.run_dir.name}: the {len(kept[1])} pairs kept from before are of another "
+                "final policy or other rollouts of it (another machine's floats): measuring again"
+            )
 
         def keep(pair: str, values: dict[str, float]) -> None:
             nonlocal last_log
