@@ -102,6 +102,34 @@ def test_profile_and_probability_of_improvement_by_hand():
     assert low[0] <= profile[0] <= high[0] and low[0] < high[0]
 
 
+def test_intervals_of_profiles_and_improvement_are_stratified_bootstraps():
+    """Resampled within each task, X's runs beat Y's on one task and lose on the other in every
+    sample (P = 1/2 exactly), and a profile over one all-0 and one all-1 task is 5/8 above 0.5
+    in every sample; pooling the runs first would spread both. On one task of 20 runs, half
+    above tau, the band is the binomial's 2.5% and 97.5% quantiles, 6/20 and 14/20."""
+    x, y = np.full((5, 2), np.nan), np.full((4, 2), np.nan)
+    x[:3, 0], x[:, 1] = 1.0, 0.0
+    y[:, 0], y[:2, 1] = 0.0, 1.0
+    interval = stats.probability_of_improvement_interval(x, y, resamples=300)
+    assert (interval.value, interval.low, interval.high) == pytest.approx((0.5,) * 3)
+    scores = np.full((5, 2), np.nan)
+    scores[:3, 0], scores[:, 1] = 0.0, 1.0
+    profile, low, high = stats.performance_profile_band(scores, np.array([0.5]), resamples=300)
+    assert (profile[0], low[0], high[0]) == pytest.approx((5 / 8,) * 3)
+    half = np.repeat([0.0, 1.0], 10)
+    profile, low, high = stats.performance_profile_band(half, np.array([0.5]), resamples=4000)
+    assert (profile[0], low[0], high[0]) == pytest.approx((0.5, 0.3, 0.7))
+    interval = stats.probability_of_improvement_interval(half, 1 - half, resamples=4000)
+    # P(X > Y) of two resampled halves: (k m + (20 - k)(20 - m)) / 400 + ties / 2, k and m ~
+    # Binomial(20, 1/2) the 1s drawn; a reference by simulation, another random stream.
+    rng = np.random.default_rng(123)
+    k, m = rng.binomial(20, 0.5, size=(2, 200_000))
+    reference = (k * (20 - m) + 0.5 * (k * m + (20 - k) * (20 - m))) / 400
+    assert interval.value == pytest.approx(0.5)
+    expected = np.percentile(reference, [2.5, 97.5])
+    assert (interval.low, interval.high) == pytest.approx(tuple(expected), abs=0.02)
+
+
 def test_a_run_is_finished_by_its_last_episode_not_its_last_evaluation(tmp_path):
     """A budget of 2,500 steps with evaluations every 1,000: the last evaluation is at 2,000,
     and the run is finished once an episode reached 2,500."""

@@ -405,6 +405,12 @@ def test_killed_sweep_restarted_finishes_each_run_exactly_once(tmp_path):
     while time.monotonic() < deadline and any(s.state == "running" for s in sweep.statuses()):
         time.sleep(0.2)
     assert not any(s.state == "done" for s in sweep.statuses())
+    newest = {
+        run.name: max(int(d.name.removeprefix("step_")) for d in checkpoints)
+        for run in sweep.runs
+        if (checkpoints := list(sweep.run_dir(run.name).glob("checkpoints/step_*")))
+    }
+    assert newest and all(step > 0 for step in newest.values())
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stdout + out.stderr
     statuses = sweep.statuses()
@@ -415,6 +421,9 @@ def test_killed_sweep_restarted_finishes_each_run_exactly_once(tmp_path):
         rows = (sweep.run_dir(run.name) / "metrics.csv").read_text().splitlines()[1:]
         steps = [int(row.split(",")[0]) for row in rows]
         assert steps == sorted(set(steps)) and steps[-1] == 600  # each episode logged once
+        if run.name in newest:  # resumed from its checkpoint, not trained again from step 0
+            log = sweep.log_file(run.name).read_text()
+            assert f"training to step 600 from {newest[run.name]:,}" in log, log
         events = read_attempts(sweep, run.name)
         ends = [e["status"] for e in events if e["event"] == "end"]
         assert ends[-1] == "done" and ends.count("done") == 1 and "error" not in ends

@@ -25,9 +25,15 @@ def problems(draw):
 def test_every_solver_respects_the_marginals(cost):
     for result in (sinkhorn(cost, tol=1e-9, max_iter=100000), emd(cost), greedy(cost)):
         assert (result.plan >= 0).all()
-        assert result.marginal_error < 1e-8, result
+        assert _marginal_error(result.plan) < 1e-8, result  # from the plan, not as reported
         assert abs(result.cost - float((cost * result.plan).sum())) < 1e-10
-        np.testing.assert_allclose(result.row_costs.sum(), result.cost, atol=1e-12)
+        np.testing.assert_allclose(result.row_costs, (cost * result.plan).sum(axis=1), atol=1e-12)
+
+
+def _marginal_error(plan):
+    """L1 error of both marginals against uniform weights, recomputed from a plan."""
+    n, m = plan.shape
+    return np.abs(plan.sum(axis=1) - 1 / n).sum() + np.abs(plan.sum(axis=0) - 1 / m).sum()
 
 
 @settings(max_examples=60, deadline=None)
@@ -41,8 +47,8 @@ def test_greedy_cost_is_never_below_emd(cost):
 def test_sinkhorn_never_returns_nan_and_reports_convergence_honestly(cost, reg):
     result = sinkhorn(cost * 20.0, reg=reg, tol=1e-9, max_iter=2000)
     assert np.isfinite(result.plan).all() and np.isfinite(result.cost)
-    if result.converged:
-        assert result.marginal_error < 1e-9 * 1.001
+    if result.converged:  # judged on the plan one gets: its own marginals are within tol
+        assert _marginal_error(result.plan) < 1e-9 * 1.001
 
 
 @settings(max_examples=40, deadline=None)

@@ -41,6 +41,52 @@ def test_rewards_sum_to_minus_scale_times_transport_cost(solver, atoms):
     assert (out.rewards <= 0).all()
 
 
+def _reference_atoms(demo, episode, atoms):
+    """The paper's recipe written out: states standardised by the demo's (not the episode's)
+    mean and 3 max(std, 0.33) + 1e-8, then (s_t, s_t+1) or s_t+1 per step."""
+    states = demo[:-1]
+    scale = 3 * np.maximum(states.std(axis=0, ddof=1), 0.33) + 1e-8
+    out = []
+    for e in (episode, demo):
+        z = (e - states.mean(axis=0)) / scale
+        out.append(np.concatenate([z[:-1], z[1:]], axis=1) if atoms == "transitions" else z[1:])
+    return out
+
+
+_REFERENCE_COSTS = {
+    "sqrt_euclidean": lambda x, y: np.sqrt(np.linalg.norm(x[:, None] - y[None], axis=2)),
+    "euclidean": lambda x, y: np.linalg.norm(x[:, None] - y[None], axis=2),
+    "sqeuclidean": lambda x, y: np.sum((x[:, None] - y[None]) ** 2, axis=2),
+}
+
+
+@pytest.mark.parametrize("metric", sorted(_REFERENCE_COSTS))
+@pytest.mark.parametrize("atoms", ["transitions", "states"])
+def test_rewards_against_an_independent_computation(metric, atoms):
+    """Reward t is minus the scaled cost that row t transports, computed here from scratch:
+    under exact OT of two equal-length uniform measures the plan is an optimal assignment
+    (scipy's), 1/T each; Sinkhorn's plan is POT's at the same lambda."""
+    from scipy.optimize import linear_sum_assignment
+
+    import ot as pot
+
+    demo, learner = _episode(seed=3), _episode(seed=4)
+    x, y = _reference_atoms(demo, learner, atoms)
+    cost = _REFERENCE_COSTS[metric](x, y)
+    num_steps = len(learner) - 1
+    scale = 5.0 * num_steps / np.sqrt(demo.shape[1])
+    rows, cols = linear_sum_assignment(cost)
+    exact = OOPS([demo], OOPSConfig(solver="emd", atoms=atoms, metric=metric))(learner)
+    np.testing.assert_allclose(exact.rewards[rows], -scale * cost[rows, cols] / num_steps,
+                               rtol=1e-10, atol=1e-12)  # fmt: skip
+    uniform = np.full(num_steps, 1 / num_steps)
+    plan = pot.sinkhorn(uniform, uniform, cost, 0.05, method="sinkhorn_log", stopThr=1e-13,
+                        numItermax=100_000)  # fmt: skip
+    entropic = OOPS([demo], OOPSConfig(atoms=atoms, metric=metric, tol=1e-12, max_iter=100_000))
+    np.testing.assert_allclose(entropic(learner).rewards, -scale * (plan * cost).sum(axis=1),
+                               rtol=1e-6)  # fmt: skip
+
+
 def test_the_expert_itself_gets_zero_reward_under_exact_ot():
     demo = _episode(seed=5)
     out = OOPS([demo], OOPSConfig(solver="emd"))(demo)
@@ -81,7 +127,10 @@ def test_warm_start_gives_the_same_rewards():
     cold = OOPS([demo])
     warm = OOPS([demo], OOPSConfig(warm_start=True))
     for learner in learners:
-        np.testing.assert_allclose(warm(learner).rewards, cold(learner).rewards, atol=1e-6)
+        warm_out, cold_out = warm(learner), cold(learner)
+        np.testing.assert_allclose(warm_out.rewards, cold_out.rewards, atol=1e-6)
+    # The second episode starts from the first's potentials: fewer iterations, not a cold start.
+    assert warm_out.coupling.iterations < cold_out.coupling.iterations
 
 
 def test_a_warm_start_saved_against_other_demos_is_dropped_not_a_failure():
