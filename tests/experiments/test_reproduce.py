@@ -221,31 +221,46 @@ def test_measures_are_cached_per_trained_step_and_skip_unfinished_runs(tmp_path)
     assert "Not measured, unfinished: Hopper-v5__oops-td3__0." in (out / "distances.md").read_text()
 
 
-def test_an_interrupted_measurement_continues_from_its_last_pair(tmp_path, monkeypatch):
-    """The solver figure's pairs take about a minute each: a measurement stopped part-way
-    keeps its pairs and, run again, measures only the others, to the uninterrupted mean."""
+def _trajectories(count, seed):
+    from ilfo.experiments.distances import Trajectory
+
+    rng = np.random.default_rng(seed)
+    return [Trajectory(rng.normal(size=(6, 2)), rng.normal(size=(5, 1))) for _ in range(count)]
+
+
+def _measure_stopped_at(pair, tmp_path, monkeypatch, rollouts, experts):
+    """A run whose final rollouts are ``rollouts``, its pairs' measurement stopped by Ctrl-C at
+    the ``pair``-th pair: the run, the measure (its calls counted in ``calls``), and ``shown``,
+    the rollouts the run is said to have (to swap them)."""
     from types import SimpleNamespace
 
     from ilfo.experiments import distances
     from ilfo.experiments.reproduce import _measure_pairs
 
-    rng = np.random.default_rng(0)
-    trajectories = [
-        distances.Trajectory(rng.normal(size=(6, 2)), rng.normal(size=(5, 1))) for _ in range(5)
-    ]
-    rollouts, experts = trajectories[:3], trajectories[3:]
-    monkeypatch.setattr(distances, "final_rollouts", lambda *a, **k: (rollouts, experts))
+    shown = {"rollouts": rollouts}
+    monkeypatch.setattr(distances, "final_rollouts", lambda *a, **k: (shown["rollouts"], experts))
     calls = []
 
     def measure(rollout, expert):
         calls.append((id(rollout), id(expert)))
-        if len(calls) == 4:
+        if len(calls) == pair:
             raise KeyboardInterrupt
         return {"d": distances.wasserstein(rollout.observations, expert.observations)}
 
     run = SimpleNamespace(run_dir=tmp_path, trained_step=1000)
     with pytest.raises(KeyboardInterrupt):
         _measure_pairs(run, "m.json", 2, measure)
+    return run, measure, calls, shown
+
+
+def test_an_interrupted_measurement_continues_from_its_last_pair(tmp_path, monkeypatch):
+    """The solver figure's pairs take about a minute each: a measurement stopped part-way
+    keeps its pairs and, run again, measures only the others, to the uninterrupted mean."""
+    from ilfo.experiments.reproduce import _measure_pairs
+
+    trajectories = _trajectories(5, seed=0)
+    rollouts, experts = trajectories[:3], trajectories[3:]
+    run, measure, calls, _ = _measure_stopped_at(4, tmp_path, monkeypatch, rollouts, experts)
     assert len(json.loads((tmp_path / ".m.partial.json").read_text())["pairs"]) == 3
     # A snapshot would carry it: the solver figure's partial file is among the kept files.
     from ilfo.training.run_dir import SNAPSHOT_FILES, partial_measure_file
@@ -294,29 +309,12 @@ def test_pairs_of_other_rollouts_of_the_same_policy_are_measured_again(tmp_path,
     """Continued on another machine, the same final policy can roll out a little differently
     (the last bits of its floats): the kept pairs are of other trajectories, so a mean mixing
     them would mix two measurements."""
-    from types import SimpleNamespace
-
     from ilfo.experiments import distances
     from ilfo.experiments.reproduce import _measure_pairs
 
-    rng = np.random.default_rng(1)
-    trajectories = [
-        distances.Trajectory(rng.normal(size=(6, 2)), rng.normal(size=(5, 1))) for _ in range(4)
-    ]
+    trajectories = _trajectories(4, seed=1)
     rollouts, experts = trajectories[:2], trajectories[2:]
-    shown = {"rollouts": rollouts}
-    monkeypatch.setattr(distances, "final_rollouts", lambda *a, **k: (shown["rollouts"], experts))
-    calls = []
-
-    def measure(rollout, expert):
-        calls.append(1)
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        return {"d": distances.wasserstein(rollout.observations, expert.observations)}
-
-    run = SimpleNamespace(run_dir=tmp_path, trained_step=1000)
-    with pytest.raises(KeyboardInterrupt):
-        _measure_pairs(run, "m.json", 2, measure)
+    run, measure, calls, shown = _measure_stopped_at(3, tmp_path, monkeypatch, rollouts, experts)
     nudged = rollouts[0].observations.copy()
     nudged[0, 0] = np.nextafter(nudged[0, 0], np.inf)  # one float, one ulp
     shown["rollouts"] = [distances.Trajectory(nudged, rollouts[0].actions), rollouts[1]]
