@@ -167,7 +167,7 @@ def test_table1_smoke_runs_into_a_report(tmp_path, capsys, monkeypatch):
 
     runs, _ = collect_runs([root / "table1"])
     oops = [r for r in runs if r.algo == "oops-td3"]
-    monkeypatch.setattr("ilfo.experiments.backends.run_sweep", lambda *a, **k: [])
+    monkeypatch.setattr("ilfo.experiments.backends.run_sweeps", lambda *a, **k: [])
     monkeypatch.setattr("ilfo.experiments.report.collect_runs", lambda paths: (oops, []))
     for name, table in (("table3", "distances.md"), ("solvers", "solvers.md")):
         _, written = reproduce_module.reproduce(name, "smoke", tmp_path / name, lambda: None)

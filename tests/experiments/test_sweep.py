@@ -24,6 +24,7 @@ from ilfo.experiments import (
     record_attempt,
     run_status,
     run_sweep,
+    run_sweeps,
     select_runs,
     snapshot_sweep,
 )
@@ -588,6 +589,73 @@ def test_a_queued_run_another_process_started_is_waited_for_not_started(tmp_path
     backend = OneSlot({a: ["done"], b: ["done"]})
     final = {s.name: s for s in run_sweep(sweep, backend, poll_seconds=0, on_change=on_change)}
     assert backend.started == [a] and final[b].state == "done"
+
+
+class _SlowJob(_FakeJob):
+    """A run that finishes at its ``polls``-th poll."""
+
+    def __init__(self, sweep, name, polls):
+        super().__init__(name, None)
+        self.sweep, self.polls = sweep, polls
+
+    def poll(self):
+        self.polls -= 1
+        if self.polls == 0:
+            _finish(self.sweep, self.name)
+            record_attempt(self.sweep, self.name, "end", status="done")
+            self.code = 0
+        return self.code
+
+
+def test_sweeps_run_as_one_queue_so_a_free_slot_takes_the_next_sweeps_runs(tmp_path):
+    """Two sweeps (the same runs' names in each) on two slots: the second sweep's run starts
+    beside the first's last run, not after it ends; each run once, messages name the sweep."""
+    one, two = (create_sweep(tmp_path / d, SweepSpec(config=TINY)) for d in ("one", "two"))
+    (name,) = (r.name for r in one.runs)
+    started = []
+
+    class Backend(_FakeBackend):
+        def start(self, sweep, name, slot):
+            started.append((sweep.root.name, slot, [job.code for job in jobs]))
+            record_attempt(sweep, name, "start")
+            jobs.append(_SlowJob(sweep, name, polls=3))
+            return jobs[-1]
+
+    jobs = []
+    messages = []
+    final = run_sweeps(
+        [one, two], Backend({}), poll_seconds=0, on_change=lambda s, m: messages.append(m)
+    )
+    # the second sweep's run started in the other slot while the first's had not ended
+    assert started == [("one", 0, []), ("two", 1, [None])]
+    assert [(s.name, s.state) for s in final] == [(name, "done"), (name, "done")]
+    assert f"started one/{name}" in messages and f"two/{name}: done" in messages
+
+
+def test_a_run_held_elsewhere_does_not_hold_up_the_next_sweep(tmp_path):
+    """One slot; the first sweep's only pending run is trained by another process: the
+    second sweep's run starts meanwhile, and the held run is waited for, never started."""
+    one, two = (create_sweep(tmp_path / d, SweepSpec(config=TINY)) for d in ("one", "two"))
+    (name,) = (r.name for r in one.runs)
+    one.run_dir(name).mkdir(parents=True)
+    other_process = RunLock(one.run_dir(name)).acquire()
+    held_when_started = []
+
+    class OneSlot(_FakeBackend):
+        slots = 1
+
+        def start(self, sweep, name, slot):
+            held_when_started.append((sweep.root.name, other_process.held))
+            return super().start(sweep, name, slot)
+
+    def on_change(statuses, message):
+        if message.startswith(f"two/{name}") and other_process.held:
+            _finish(one, name)  # the other process finishes its run
+            other_process.release()
+
+    final = run_sweeps([one, two], OneSlot({name: ["done"]}), poll_seconds=0, on_change=on_change)
+    assert held_when_started == [("two", True)]
+    assert [s.state for s in final] == ["done", "done"]
 
 
 def test_a_worker_finding_its_run_held_elsewhere_exits_busy_not_failed(tmp_path):

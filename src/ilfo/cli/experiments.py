@@ -339,7 +339,7 @@ def _add_backend_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _backend_factory(args: argparse.Namespace) -> Any:
-    """A function making the backend the flags ask for (checked now, made per sweep)."""
+    """A function making the backend the flags ask for (checked now, made when the runs start)."""
     from ilfo.experiments import LocalBackend, RayBackend
 
     if args.backend == "ray":

@@ -2,7 +2,13 @@
 ``backends``: the scheduler, local or on Ray; ``worker``: one run in its own process) and reports
 over them (``stats``, ``report``, ``paper``)."""
 
-from ilfo.experiments.backends import LocalBackend, RayBackend, progress_line, run_sweep
+from ilfo.experiments.backends import (
+    LocalBackend,
+    RayBackend,
+    progress_line,
+    run_sweep,
+    run_sweeps,
+)
 from ilfo.experiments.sweep import (
     RunStatus,
     Sweep,
@@ -38,6 +44,7 @@ __all__ = [
     "record_attempt",
     "run_status",
     "run_sweep",
+    "run_sweeps",
     "select_runs",
     "snapshot_sweep",
     "summary",

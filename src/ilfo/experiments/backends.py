@@ -1,7 +1,8 @@
 """Running a sweep's runs: one scheduler, two backends.
 
 ``run_sweep`` keeps as many runs going as the backend has slots, each a worker process
-(``ilfo.experiments.worker``) that trains or resumes one run. A run that ends with an error is
+(``ilfo.experiments.worker``) that trains or resumes one run; ``run_sweeps`` does so over
+several sweeps as one queue. A run that ends with an error is
 started again while its failures are within the sweep's ``retries``; a run that another process
 is training (its run lock is held) is waited for, not started twice. Ctrl-C interrupts every
 worker (each checkpoints first) and returns; starting the sweep again continues it.
@@ -21,7 +22,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Sequence
 from typing import Any, Protocol
 
 from ilfo.experiments.sweep import (
@@ -113,9 +114,9 @@ def cpus_of_live_workers(sweep: Sweep, exclude_pids: Collection[int] = ()) -> se
 
 class LocalBackend:
     """Worker processes on this machine, each pinned to ``cores_per_run`` CPUs of its own: CPUs
-    that another ``sweep run`` process's live workers on the same sweep hold are passed over
-    where enough others are free (two processes with disjoint ``--only`` would otherwise both
-    pin their first worker to the first CPU)."""
+    that another ``sweep run`` process's live workers hold, on any sweep this backend has
+    started a run of, are passed over where enough others are free (two processes with
+    disjoint ``--only`` would otherwise both pin their first worker to the first CPU)."""
 
     def __init__(self, cores_per_run: int = 1, workers: int | None = None) -> None:
         cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
@@ -139,17 +140,23 @@ class LocalBackend:
             else [None] * self.slots
         )
         self._jobs: dict[int, _ProcessJob] = {}  # slot -> its latest job
+        self._sweeps: dict[str, Sweep] = {}  # root -> a sweep it has started a run of
 
     def cpu_set(self, sweep: Sweep, slot: int) -> list[int] | None:
         """The CPUs for a new worker in ``slot``: the first ``cores_per_run`` of this process's
-        CPUs that neither its other slots nor another process's live workers on the sweep
-        hold. Where that leaves too few (more workers than CPUs), the slot's own share, unless
-        another of its live slots holds it now: then CPUs that only other processes' workers
-        hold, which come free when those end, rather than doubling up on its own."""
+        CPUs that neither its other slots nor another process's live workers on the sweep (or
+        on the other sweeps it has started runs of) hold. Where that leaves too few (more
+        workers than CPUs), the slot's own share, unless another of its live slots holds it
+        now: then CPUs that only other processes' workers hold, which come free when those
+        end, rather than doubling up on its own."""
         if self.cpus is None:
             return None
         ours = {slot_ for slot_, job in self._jobs.items() if job.poll() is None}
-        taken = cpus_of_live_workers(sweep, {self._jobs[s].process.pid for s in ours})
+        ours_pids = {self._jobs[s].process.pid for s in ours}
+        self._sweeps[str(sweep.root)] = sweep
+        taken: set[int] = set()
+        for seen in self._sweeps.values():
+            taken |= cpus_of_live_workers(seen, ours_pids)
         held_by_ours: set[int] = set()
         for other in ours - {slot}:
             held_by_ours.update(self.cpu_sets[other] or ())
@@ -284,82 +291,116 @@ def run_sweep(
     final status. ``names`` limits that to some runs (``select_runs``; the others are left
     as they are, and still reported). ``on_change(statuses, message)`` is called at each start
     and end (and about every ``poll_seconds`` with an empty message) for progress display."""
-    by_name = {run.name: run for run in sweep.runs}
-    statuses = {s.name: s for s in sweep.statuses()}
+    by_name = {run.name for run in sweep.runs}
     chosen = set(by_name if names is None else names)
-    if unknown := chosen - by_name.keys():
+    if unknown := chosen - by_name:
         raise KeyError(f"{sweep.root} has no runs named {sorted(unknown)}")
-    queue = [name for name, s in statuses.items() if s.state == "pending" and name in chosen]
-    elsewhere = [name for name, s in statuses.items() if s.state == "running" and name in chosen]
-    active: dict[int, Job] = {}  # slot -> job
+    return _schedule([sweep], {(0, name) for name in chosen}, backend, poll_seconds, on_change)
+
+
+def run_sweeps(
+    sweeps: Sequence[Sweep],
+    backend: Backend,
+    *,
+    poll_seconds: float = 1.0,
+    on_change: Callable[[list[RunStatus], str], None] | None = None,
+) -> list[RunStatus]:
+    """``run_sweep`` over several sweeps as one queue, in their order: a slot that one sweep's
+    last runs leave free (or its runs that another process trains) takes the next sweep's
+    runs at once, rather than idling until the sweep ends. Returns every run's final status,
+    sweep by sweep; the messages name runs as ``<sweep directory>/<run>``."""
+    chosen = {(i, run.name) for i, sweep in enumerate(sweeps) for run in sweep.runs}
+    return _schedule(list(sweeps), chosen, backend, poll_seconds, on_change)
+
+
+_Key = tuple[int, str]  # (the sweep's index, the run's name)
+
+
+def _schedule(
+    sweeps: list[Sweep],
+    chosen: set[_Key],
+    backend: Backend,
+    poll_seconds: float,
+    on_change: Callable[[list[RunStatus], str], None] | None,
+) -> list[RunStatus]:
+    runs = {(i, run.name): run for i, sweep in enumerate(sweeps) for run in sweep.runs}
+    statuses = {
+        (i, status.name): status for i, sweep in enumerate(sweeps) for status in sweep.statuses()
+    }
+    queue = [key for key, s in statuses.items() if s.state == "pending" and key in chosen]
+    elsewhere = [key for key, s in statuses.items() if s.state == "running" and key in chosen]
+    active: dict[int, tuple[_Key, Job]] = {}  # slot -> its run and job
     notify = on_change or (lambda statuses, message: None)
     last_progress = time.monotonic()
 
-    def refresh(name: str) -> RunStatus:
-        statuses[name] = run_status(sweep, by_name[name])
-        return statuses[name]
+    def label(key: _Key) -> str:
+        return key[1] if len(sweeps) == 1 else f"{sweeps[key[0]].root.name}/{key[1]}"
 
-    def ends_recorded(name: str) -> int:
-        return sum(e.get("event") == "end" for e in read_attempts(sweep, name))
+    def refresh(key: _Key) -> RunStatus:
+        statuses[key] = run_status(sweeps[key[0]], runs[key])
+        return statuses[key]
 
-    ends_at_start: dict[str, int] = {}
+    def ends_recorded(key: _Key) -> int:
+        return sum(e.get("event") == "end" for e in read_attempts(sweeps[key[0]], key[1]))
+
+    ends_at_start: dict[_Key, int] = {}
 
     try:
         while queue or active or elsewhere:
             for slot in range(backend.slots):
                 if slot not in active and queue:
-                    name = queue.pop(0)
-                    state = refresh(name).state  # another process may have started it since
+                    key = queue.pop(0)
+                    state = refresh(key).state  # another process may have started it since
                     if state != "pending":
                         if state == "running":
-                            elsewhere.append(name)
+                            elsewhere.append(key)
                         continue
-                    ends_at_start[name] = ends_recorded(name)
-                    active[slot] = backend.start(sweep, name, slot)
-                    notify(list(statuses.values()), f"started {name}")
+                    ends_at_start[key] = ends_recorded(key)
+                    active[slot] = key, backend.start(sweeps[key[0]], key[1], slot)
+                    notify(list(statuses.values()), f"started {label(key)}")
             time.sleep(poll_seconds)
-            for slot, job in list(active.items()):
+            for slot, (key, job) in list(active.items()):
                 code = job.poll()
                 if code is None:
                     continue
                 del active[slot]
-                if code != EXIT_INTERRUPTED and ends_recorded(job.name) == ends_at_start[job.name]:
+                if code != EXIT_INTERRUPTED and ends_recorded(key) == ends_at_start[key]:
                     # Killed (OOM, SIGKILL, a lost node), or it failed before it could record
                     # its end (a full disk, a bad pin): counted as a failure, so that the
                     # retries bound it.
                     record_attempt(
-                        sweep, job.name, "end", status="killed", error=f"worker exit {code}"
+                        sweeps[key[0]], key[1], "end", status="killed", error=f"worker exit {code}"
                     )
-                status = refresh(job.name)
+                status = refresh(key)
                 if status.state == "pending":
-                    queue.append(job.name)  # an error within the retries, or an interruption
+                    queue.append(key)  # an error within the retries, or an interruption
                 elif status.state == "running":  # another process trains it: wait for that
-                    elsewhere.append(job.name)
-                notify(list(statuses.values()), f"{job.name}: {_ended(status, code)}")
-            for name in list(elsewhere):
-                status = refresh(name)
+                    elsewhere.append(key)
+                notify(list(statuses.values()), f"{label(key)}: {_ended(status, code)}")
+            for key in list(elsewhere):
+                status = refresh(key)
                 if status.state != "running":
-                    elsewhere.remove(name)
+                    elsewhere.remove(key)
                     if status.state == "pending":
-                        queue.append(name)
+                        queue.append(key)
             if time.monotonic() - last_progress >= PROGRESS_SECONDS:  # the running runs' steps
-                for job in active.values():
-                    refresh(job.name)
+                for key, _ in active.values():
+                    refresh(key)
                 last_progress = time.monotonic()
             notify(list(statuses.values()), "")
     except KeyboardInterrupt:
-        for job in active.values():
+        for _, job in active.values():
             job.interrupt()
         deadline = time.monotonic() + 300  # each worker checkpoints before it exits
         while active and time.monotonic() < deadline:
-            for slot, job in list(active.items()):
+            for slot, (_, job) in list(active.items()):
                 if job.poll() is not None:
                     del active[slot]
             time.sleep(0.2)
         raise
     finally:
         backend.close()
-    return [refresh(name) for name in by_name]
+    return [refresh(key) for key in runs]
 
 
 def _ended(status: RunStatus, code: int) -> str:

@@ -438,7 +438,7 @@ def reproduce(
     """Run the plan's sweeps in ``root/<sweep>`` (each resumable: run it again to continue)
     and write the report to ``root/report``; returns the plan and the report's files.
     ``log`` gets a line as each run's final rollouts are measured (minutes each)."""
-    from ilfo.experiments.backends import run_sweep
+    from ilfo.experiments.backends import run_sweeps
     from ilfo.experiments.report import build_report, collect_runs, write_report
     from ilfo.experiments.sweep import create_sweep
 
@@ -453,9 +453,9 @@ def reproduce(
             for env in cal.envs
         }
         return the_plan, write_calibration(results, root / "report")
-    for sub, spec in the_plan.sweeps.items():
-        sweep = create_sweep(root / sub, spec)
-        run_sweep(sweep, backend_factory(), on_change=on_change)
+    sweeps = [create_sweep(root / sub, spec) for sub, spec in the_plan.sweeps.items()]
+    if sweeps:  # one queue: a core that one sweep's last runs leave free takes the next's
+        run_sweeps(sweeps, backend_factory(), on_change=on_change)
     runs, skipped = collect_runs([root / sub for sub in the_plan.sweeps])
     report = build_report(runs, skipped=[*skipped, *the_plan.left_out])
     out = root / "report"
