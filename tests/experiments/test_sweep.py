@@ -296,6 +296,9 @@ class _FakeBackend:
             return _FakeJob(name, 1)
         return _FakeJob(name, -9)
 
+    def watch(self, sweeps):
+        self.watched = [sweep.root for sweep in sweeps]
+
     def close(self):
         pass
 
@@ -565,6 +568,22 @@ def test_local_workers_pass_over_cpus_another_process_holds(tmp_path):
     assert two.cpu_set(sweep, 1) == cpus[:1]
 
 
+def test_local_workers_pass_over_cpus_held_on_another_watched_sweep(tmp_path):
+    """Another process's live worker on a sweep whose runs this one has not started yet (all
+    held elsewhere) still keeps this one's first worker off its CPU, once the sweep is
+    watched."""
+    from ilfo.experiments.backends import LocalBackend
+
+    one, two = (create_sweep(tmp_path / d, SweepSpec(config=TINY)) for d in ("one", "two"))
+    (name,) = (r.name for r in one.runs)
+    cpus = sorted(os.sched_getaffinity(0))
+    record_attempt(one, name, "start", pid=os.getpid(), cpus=cpus[:1])  # live, elsewhere
+    backend = LocalBackend(workers=1)
+    assert backend.cpu_set(two, 0) == cpus[:1]  # sweep one not watched: not seen
+    backend.watch([one, two])
+    assert backend.cpu_set(two, 0) == cpus[1:2]
+
+
 def test_a_queued_run_another_process_started_is_waited_for_not_started(tmp_path):
     """The queue is read at the start; a run that another `sweep run` process starts meanwhile
     is checked again before its start, waited for, and never started here."""
@@ -634,12 +653,14 @@ def test_sweeps_run_as_one_queue_so_a_free_slot_takes_the_next_sweeps_runs(tmp_p
 
 def test_a_run_held_elsewhere_does_not_hold_up_the_next_sweep(tmp_path):
     """One slot; the first sweep's only pending run is trained by another process: the
-    second sweep's run starts meanwhile, and the held run is waited for, never started."""
+    second sweep's run starts meanwhile, and the held run is waited for: when the other
+    process lets it go unfinished, it is started here."""
     one, two = (create_sweep(tmp_path / d, SweepSpec(config=TINY)) for d in ("one", "two"))
     (name,) = (r.name for r in one.runs)
     one.run_dir(name).mkdir(parents=True)
     other_process = RunLock(one.run_dir(name)).acquire()
     held_when_started = []
+    calls = []
 
     class OneSlot(_FakeBackend):
         slots = 1
@@ -649,13 +670,35 @@ def test_a_run_held_elsewhere_does_not_hold_up_the_next_sweep(tmp_path):
             return super().start(sweep, name, slot)
 
     def on_change(statuses, message):
-        if message.startswith(f"two/{name}") and other_process.held:
-            _finish(one, name)  # the other process finishes its run
-            other_process.release()
+        calls.append(message)
+        assert len(calls) < 10_000, "the scheduler waits on the held run alone"
+        if calls[-6:-5] == [f"two/{name}: done"]:  # five polls on, with nothing else to run,
+            other_process.release()  # the other process stops, its run unfinished
 
-    final = run_sweeps([one, two], OneSlot({name: ["done"]}), poll_seconds=0, on_change=on_change)
-    assert held_when_started == [("two", True)]
+    backend = OneSlot({name: ["done", "done"]})
+    final = run_sweeps([one, two], backend, poll_seconds=0, on_change=on_change)
+    assert held_when_started == [("two", True), ("one", False)]
     assert [s.state for s in final] == ["done", "done"]
+    assert backend.watched == [one.root, two.root]
+
+
+def test_a_retried_run_goes_before_later_sweeps_runs(tmp_path):
+    """A run that failed within its retries rejoins the queue after its own sweep's runs and
+    before the next sweep's, as when each sweep ran in turn."""
+    one = create_sweep(tmp_path / "one", SweepSpec(seed=(0, 1), config=TINY, retries=1))
+    two = create_sweep(tmp_path / "two", SweepSpec(seed=(5,), config=TINY))
+    a, b = (r.name for r in one.runs)
+    (c,) = (r.name for r in two.runs)
+
+    class OneSlot(_FakeBackend):
+        slots = 1
+
+    backend = OneSlot({a: ["error", "done"], b: ["done"], c: ["done"]})
+    final = run_sweeps([one, two], backend, poll_seconds=0)
+    assert backend.started == [a, b, a, c]
+    assert [s.state for s in final] == ["done", "done", "done"]
+    with pytest.raises(ValueError, match="given twice"):
+        run_sweeps([one, open_sweep(tmp_path / "one")], backend, poll_seconds=0)
 
 
 def test_a_worker_finding_its_run_held_elsewhere_exits_busy_not_failed(tmp_path):

@@ -60,6 +60,10 @@ class Backend(Protocol):
     slots: int
     """How many runs at once."""
 
+    def watch(self, sweeps: Sequence[Sweep]) -> None:
+        """Told, before any start, every sweep whose runs the scheduler may start."""
+        ...
+
     def start(self, sweep: Sweep, name: str, slot: int) -> Job: ...
 
     def close(self) -> None: ...
@@ -114,8 +118,8 @@ def cpus_of_live_workers(sweep: Sweep, exclude_pids: Collection[int] = ()) -> se
 
 class LocalBackend:
     """Worker processes on this machine, each pinned to ``cores_per_run`` CPUs of its own: CPUs
-    that another ``sweep run`` process's live workers hold, on any sweep this backend has
-    started a run of, are passed over where enough others are free (two processes with
+    that another ``sweep run`` process's live workers hold, on any sweep the scheduler
+    watches, are passed over where enough others are free (two processes with
     disjoint ``--only`` would otherwise both pin their first worker to the first CPU)."""
 
     def __init__(self, cores_per_run: int = 1, workers: int | None = None) -> None:
@@ -140,12 +144,12 @@ class LocalBackend:
             else [None] * self.slots
         )
         self._jobs: dict[int, _ProcessJob] = {}  # slot -> its latest job
-        self._sweeps: dict[str, Sweep] = {}  # root -> a sweep it has started a run of
+        self._sweeps: dict[str, Sweep] = {}  # root -> a sweep the scheduler may start runs of
 
     def cpu_set(self, sweep: Sweep, slot: int) -> list[int] | None:
         """The CPUs for a new worker in ``slot``: the first ``cores_per_run`` of this process's
         CPUs that neither its other slots nor another process's live workers on the sweep (or
-        on the other sweeps it has started runs of) hold. Where that leaves too few (more
+        on the other sweeps it watches) hold. Where that leaves too few (more
         workers than CPUs), the slot's own share, unless another of its live slots holds it
         now: then CPUs that only other processes' workers hold, which come free when those
         end, rather than doubling up on its own."""
@@ -170,6 +174,11 @@ class LocalBackend:
                 return own
         self.cpu_sets[slot] = free[: self.cores_per_run]
         return self.cpu_sets[slot]
+
+    def watch(self, sweeps: Sequence[Sweep]) -> None:
+        """Pass over the CPUs that other processes' live workers hold on these sweeps too (a
+        process whose first sweep's runs are all held elsewhere starts another sweep's)."""
+        self._sweeps.update((str(sweep.root), sweep) for sweep in sweeps)
 
     def start(self, sweep: Sweep, name: str, slot: int) -> Job:
         env = {
@@ -273,6 +282,9 @@ class RayBackend:
         ref = self._task.remote(worker_command(sweep, name), env, str(log.resolve()))
         return _RayJob(name, ref, self._ray)
 
+    def watch(self, sweeps: Sequence[Sweep]) -> None:
+        pass  # Ray places each task on CPUs it holds
+
     def close(self) -> None:
         if self._owns:
             self._ray.shutdown()
@@ -307,8 +319,13 @@ def run_sweeps(
 ) -> list[RunStatus]:
     """``run_sweep`` over several sweeps as one queue, in their order: a slot that one sweep's
     last runs leave free (or its runs that another process trains) takes the next sweep's
-    runs at once, rather than idling until the sweep ends. Returns every run's final status,
-    sweep by sweep; the messages name runs as ``<sweep directory>/<run>``."""
+    runs at once, rather than idling until the sweep ends (a run that is retried or comes free
+    again rejoins the queue after its own sweep's runs, before later sweeps'). Returns every
+    run's final status, sweep by sweep; with several sweeps, the messages name runs as
+    ``<sweep directory's name>/<run>``."""
+    roots = [sweep.root.resolve() for sweep in sweeps]
+    if len(set(roots)) != len(roots):
+        raise ValueError(f"a sweep is given twice: {[str(s.root) for s in sweeps]}")
     chosen = {(i, run.name) for i, sweep in enumerate(sweeps) for run in sweep.runs}
     return _schedule(list(sweeps), chosen, backend, poll_seconds, on_change)
 
@@ -340,11 +357,16 @@ def _schedule(
         statuses[key] = run_status(sweeps[key[0]], runs[key])
         return statuses[key]
 
+    def enqueue(key: _Key) -> None:  # after its sweep's queued runs, before later sweeps'
+        later = [i for i, queued in enumerate(queue) if queued[0] > key[0]]
+        queue.insert(later[0] if later else len(queue), key)
+
     def ends_recorded(key: _Key) -> int:
         return sum(e.get("event") == "end" for e in read_attempts(sweeps[key[0]], key[1]))
 
     ends_at_start: dict[_Key, int] = {}
 
+    backend.watch(sweeps)
     try:
         while queue or active or elsewhere:
             for slot in range(backend.slots):
@@ -373,7 +395,7 @@ def _schedule(
                     )
                 status = refresh(key)
                 if status.state == "pending":
-                    queue.append(key)  # an error within the retries, or an interruption
+                    enqueue(key)  # an error within the retries, or an interruption
                 elif status.state == "running":  # another process trains it: wait for that
                     elsewhere.append(key)
                 notify(list(statuses.values()), f"{label(key)}: {_ended(status, code)}")
@@ -382,7 +404,7 @@ def _schedule(
                 if status.state != "running":
                     elsewhere.remove(key)
                     if status.state == "pending":
-                        queue.append(key)
+                        enqueue(key)
             if time.monotonic() - last_progress >= PROGRESS_SECONDS:  # the running runs' steps
                 for key, _ in active.values():
                     refresh(key)
