@@ -2,10 +2,10 @@
 
 ``run_sweep`` keeps as many runs going as the backend has slots, each a worker process
 (``ilfo.experiments.worker``) that trains or resumes one run; ``run_sweeps`` does so over
-several sweeps as one queue. A run that ends with an error is
-started again while its failures are within the sweep's ``retries``; a run that another process
-is training (its run lock is held) is waited for, not started twice. Ctrl-C interrupts every
-worker (each checkpoints first) and returns; starting the sweep again continues it.
+several sweeps as one queue. A run that ends with an error is started again while its
+failures are within the sweep's ``retries``; a run that another process is training (its run
+lock is held) is waited for, not started twice. Ctrl-C interrupts every worker (each
+checkpoints first) and returns; starting the sweep again continues it.
 
 - ``LocalBackend`` (the default, no dependency): a pool sized to this machine's cores, each
   worker pinned to its own ``cores_per_run`` CPUs with BLAS/OpenMP threads to match.
@@ -303,9 +303,9 @@ def run_sweep(
     final status. ``names`` limits that to some runs (``select_runs``; the others are left
     as they are, and still reported). ``on_change(statuses, message)`` is called at each start
     and end (and about every ``poll_seconds`` with an empty message) for progress display."""
-    by_name = {run.name for run in sweep.runs}
-    chosen = set(by_name if names is None else names)
-    if unknown := chosen - by_name:
+    in_sweep = {run.name for run in sweep.runs}
+    chosen = set(in_sweep if names is None else names)
+    if unknown := chosen - in_sweep:
         raise KeyError(f"{sweep.root} has no runs named {sorted(unknown)}")
     return _schedule([sweep], {(0, name) for name in chosen}, backend, poll_seconds, on_change)
 
