@@ -701,6 +701,79 @@ def test_a_retried_run_goes_before_later_sweeps_runs(tmp_path):
         run_sweeps([one, open_sweep(tmp_path / "one")], backend, poll_seconds=0)
 
 
+def test_run_sweeps_limits_each_sweep_to_its_names(tmp_path):
+    one = create_sweep(tmp_path / "one", SweepSpec(seed=(0, 1), config=TINY))
+    two = create_sweep(tmp_path / "two", SweepSpec(seed=(2, 3), config=TINY))
+    a, b = (r.name for r in one.runs)
+    _, d = (r.name for r in two.runs)
+    backend = _FakeBackend({a: ["done"], d: ["done"]})
+    final = run_sweeps([one, two], backend, poll_seconds=0, names=[[a], [d]])
+    assert backend.started == [a, d]
+    assert [s.state for s in final] == ["done", "pending", "pending", "done"]
+    with pytest.raises(KeyError, match="no runs named"):
+        run_sweeps([one, two], backend, poll_seconds=0, names=[[b], [a]])
+    with pytest.raises(ValueError, match="1 collections for 2 sweeps"):
+        run_sweeps([one, two], backend, poll_seconds=0, names=[[b]])
+
+
+def test_cli_continues_several_sweeps_as_one_queue(tmp_path, monkeypatch, capsys):
+    """`ilfo sweep run A B`: both sweeps' runs through one scheduler and backend, in order;
+    --only/--skip, --retry-failed, --dry-run and the exit status cover both."""
+    from ilfo.cli import main
+
+    one = create_sweep(tmp_path / "one", SweepSpec(seed=(0, 1), config=TINY))
+    two = create_sweep(tmp_path / "two", SweepSpec(seed=(5, 6), config=TINY, retries=0))
+    a, b = (r.name for r in one.runs)
+    c, d = (r.name for r in two.runs)
+    _finish(one, a)
+    backend = _FakeBackend({b: ["done"], c: ["error", "done"], d: ["done"]})
+    backend.slots = 1
+    monkeypatch.setattr("ilfo.cli.experiments._backend_factory", lambda args: lambda: backend)
+    dirs = [str(one.root), str(two.root)]
+    assert main(["sweep", "run", *dirs, "--skip", "*__6", "--dry-run"]) == 0
+    assert capsys.readouterr().out.splitlines() == [
+        f"one/{a}  done",
+        f"one/{b}  pending",
+        f"two/{c}  pending",
+        f"two/{d}  pending  (left out)",
+    ]
+    assert backend.started == []
+    # c fails and is given up (no retries): the command says so and fails
+    assert main(["sweep", "run", *dirs, "--skip", "*__6", "--no-progress"]) == 1
+    out = capsys.readouterr().out
+    assert backend.started == [b, c]
+    assert f"sweep {two.root}: 2 runs" in out and "running 1 of them" in out
+    assert f"failed: {c}: ValueError: boom" in out
+    assert main(["sweep", "run", *dirs, "--retry-failed", "--no-progress"]) == 0
+    assert backend.started == [b, c, c, d]
+    assert all(s.state == "done" for sweep in (one, two) for s in sweep.statuses())
+
+
+def test_cli_refuses_to_change_several_sweeps_at_once(tmp_path, capsys):
+    from ilfo.cli import main
+
+    one, two = (create_sweep(tmp_path / d, SweepSpec(config=TINY)) for d in ("one", "two"))
+    dirs = [str(one.root), str(two.root)]
+    spec_file = tmp_path / "spec.json"
+    spec_file.write_text(json.dumps(one.spec.to_dict()))
+    changes = (
+        ["--steps", "400"],
+        ["--seeds", "0-2"],
+        ["--retries", "3"],
+        ["--spec", str(spec_file)],
+    )
+    for change in changes:
+        assert main(["sweep", "run", *dirs, *change, "--dry-run"]) == 2
+        assert "give one DIR" in capsys.readouterr().err
+    assert main(["sweep", "run", dirs[0], dirs[0] + "/", "--dry-run"]) == 2
+    assert "given twice" in capsys.readouterr().err
+    assert main(["sweep", "run", *dirs, str(tmp_path / "none"), "--dry-run"]) == 2
+    assert "is not a sweep directory" in capsys.readouterr().err
+    assert main(["sweep", "run", *dirs, "--only", "Walker2d-v5__*", "--dry-run"]) == 2
+    assert "no run matches 'Walker2d-v5__*'" in capsys.readouterr().err
+    assert open_sweep(one.root).spec == one.spec and not (tmp_path / "none").exists()
+
+
 def test_a_worker_finding_its_run_held_elsewhere_exits_busy_not_failed(tmp_path):
     from ilfo.experiments.worker import EXIT_BUSY, main
 

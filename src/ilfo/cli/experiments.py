@@ -32,7 +32,9 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
             "fast --td3-batch-size 256; a part's flags apply to the algos that use that part). "
             "Finished runs are skipped, interrupted ones resume from their checkpoints, failed "
             "ones are retried up to --retries times. With a DIR that holds a sweep and no axes, "
-            "continues it. Ctrl-C checkpoints every run and stops."
+            "continues it; with several such DIRs, continues them as one queue, in their "
+            "order (a core that one sweep's last runs leave free takes the next's). Ctrl-C "
+            "checkpoints every run and stops."
         ),
         epilog='Spec file (JSON or TOML): {"env": [...], "algo": [...], "num_demos": '
         '[1, 4, 10], "seed": "0-4", "config": {"steps": 1000000, "preset": "fast"}, '
@@ -40,7 +42,12 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
         "name a settings file (a run's config.json, whose env, algo, demos, seed and out the "
         "sweep sets).",
     )
-    run.add_argument("dir", help="the sweep directory (created if missing)")
+    run.add_argument(
+        "dir",
+        nargs="+",
+        metavar="DIR",
+        help="the sweep directory (created if missing), or several existing ones to continue",
+    )
     run.add_argument("--spec", default=None, metavar="FILE", help="a sweep spec file")
     run.add_argument("--env", nargs="+", default=None, help="environment ids")
     run.add_argument("--algo", nargs="+", default=None, help="algorithms")
@@ -111,7 +118,7 @@ def _train_settings(rest: list[str]) -> dict[str, Any]:
     return settings_from_args(args.config, overrides, part_flags(args), drop)
 
 
-def _spec_from_args(args: argparse.Namespace, rest: list[str]) -> Any:
+def _spec_from_args(args: argparse.Namespace, root: Path, rest: list[str]) -> Any:
     import dataclasses
 
     from ilfo.experiments import SweepSpec, open_sweep, parse_seeds
@@ -128,8 +135,8 @@ def _spec_from_args(args: argparse.Namespace, rest: list[str]) -> Any:
     if args.spec is None and not given and not rest:
         if args.retries is None:
             return None
-        if (Path(args.dir) / MANIFEST_FILE).is_file():  # the sweep there, with other retries
-            return dataclasses.replace(open_sweep(args.dir).spec, retries=args.retries)
+        if (root / MANIFEST_FILE).is_file():  # the sweep there, with other retries
+            return dataclasses.replace(open_sweep(root).spec, retries=args.retries)
     raw: dict[str, Any] = read_settings_file(args.spec) if args.spec else {}
     spec = SweepSpec.from_dict(raw, args.spec or "the command line")
     # A flag changes its one field of a part (--td3-tau), not the spec file's whole part.
@@ -141,61 +148,116 @@ def _spec_from_args(args: argparse.Namespace, rest: list[str]) -> Any:
 
 
 def _run_sweep(args: argparse.Namespace) -> int:
-    from ilfo.experiments import (
-        create_sweep,
-        expand,
-        matching_sweep,
-        open_sweep,
-        progress_line,
-        record_attempt,
-        run_sweep,
-        select_runs,
-    )
+    from ilfo.experiments import progress_line, record_attempt, run_sweeps
 
-    rest = list(args.rest)
-    spec = _spec_from_args(args, rest)
-    root = Path(args.dir)
+    roots = [Path(d) for d in args.dir]
+    make_backend = _backend_factory(args)  # bad --workers or --cores-per-run fail before all
+    if len(roots) == 1:
+        chosen_sweeps = _one_sweep(args, roots[0])
+    else:
+        chosen_sweeps = _several_sweeps(args, roots)
+    if chosen_sweeps is None:  # a dry run, listed
+        return 0
+    sweeps, chosen = chosen_sweeps
+    if args.retry_failed:
+        for sweep in sweeps:
+            for status in sweep.statuses():
+                if status.state == "failed":
+                    record_attempt(sweep, status.name, "reset")
+    backend = make_backend()
+    at_once = f"{backend.slots} at once ({args.backend})"
+    for sweep, names in zip(sweeps, chosen, strict=True):
+        print(f"sweep {sweep.root}: {len(sweep.runs)} runs, {at_once}")
+        if len(names) < len(sweep.runs):
+            print(
+                f"running {len(names)} of them (--only/--skip); the other "
+                f"{len(sweep.runs) - len(names)} are left as they are"
+            )
+    statuses = [status for sweep in sweeps for status in sweep.statuses()]
+    print(progress_line(statuses))
+    display = _Progress(statuses, enabled=not args.no_progress)
+    try:
+        with stop_signals_interrupt():
+            final = run_sweeps(sweeps, backend, on_change=display.update, names=chosen)
+    finally:
+        display.close()
+    print(progress_line(final))
+    failed = False
+    for sweep in sweeps:  # `final` is sweep by sweep: read each again for its given-up runs
+        given_up = [s for s in sweep.statuses() if s.state == "failed"]
+        _print_failed(sweep, given_up)
+        failed = failed or bool(given_up)
+    return 1 if failed else 0
+
+
+_ChosenRuns = tuple[list[Any], list[tuple[str, ...]]]  # the sweeps, and each one's runs to run
+
+
+def _one_sweep(args: argparse.Namespace, root: Path) -> _ChosenRuns | None:
+    """The sweep in (or for) ``root``, created from the spec or axes given, and its chosen
+    runs; ``None`` after a dry run's listing."""
+    from ilfo.experiments import create_sweep, expand, matching_sweep, open_sweep, select_runs
+
+    spec = _spec_from_args(args, root, list(args.rest))
     # An existing sweep given a spec must be the same sweep, --dry-run or not.
     sweep = open_sweep(root) if spec is None else matching_sweep(root, spec)
     runs = sweep.runs if sweep is not None else expand(spec)
     # Chosen before a new sweep directory is made: a misspelt pattern leaves nothing behind.
     chosen = select_runs([run.name for run in runs], args.only, args.skip)
-    make_backend = _backend_factory(args)  # likewise bad --workers or --cores-per-run
     if args.dry_run:
         if sweep is None:
             for run in runs:
                 print(run.name if run.name in chosen else f"{run.name}  (left out)")
         else:
-            for status in sweep.statuses():
-                left_out = "" if status.name in chosen else "  (left out)"
-                print(f"{status.name}  {status.state}{left_out}")
-        return 0
+            _list_runs(sweep, chosen, prefix="")
+        return None
     if spec is not None:  # a new sweep, or the same one with other retries
         sweep = create_sweep(root, spec)
     assert sweep is not None
-    statuses = sweep.statuses()
-    if args.retry_failed:
-        for status in statuses:
-            if status.state == "failed":
-                record_attempt(sweep, status.name, "reset")
-    backend = make_backend()
-    print(f"sweep {root}: {len(sweep.runs)} runs, {backend.slots} at once ({args.backend})")
-    if len(chosen) < len(sweep.runs):
-        print(
-            f"running {len(chosen)} of them (--only/--skip); the other "
-            f"{len(sweep.runs) - len(chosen)} are left as they are"
+    return [sweep], [chosen]
+
+
+def _several_sweeps(args: argparse.Namespace, roots: list[Path]) -> _ChosenRuns | None:
+    """Existing sweeps to continue as one queue, and each one's chosen runs (--only and --skip
+    apply to all: a pattern must match a run of one of them); ``None`` after a dry run's
+    listing."""
+    from ilfo.experiments import open_sweep, select_runs
+
+    changes = [
+        flag
+        for flag, value in (
+            ("--spec", args.spec),
+            ("--env", args.env),
+            ("--algo", args.algo),
+            ("--num-demos", args.num_demos),
+            ("--seeds", args.seeds),
+            ("--retries", args.retries),
         )
-    print(progress_line(statuses))
-    display = _Progress(statuses, enabled=not args.no_progress)
-    try:
-        with stop_signals_interrupt():
-            final = run_sweep(sweep, backend, on_change=display.update, names=chosen)
-    finally:
-        display.close()
-    print(progress_line(final))
-    failed = [s for s in final if s.state == "failed"]
-    _print_failed(sweep, failed)
-    return 1 if failed else 0
+        if value is not None
+    ]
+    if args.rest:
+        changes.append(f"ilfo train flags ({' '.join(args.rest)})")
+    if changes:
+        raise ValueError(
+            f"several sweep directories are continued as they are; {', '.join(changes)} "
+            "make or change one sweep: give one DIR"
+        )
+    if len({root.resolve() for root in roots}) < len(roots):
+        raise ValueError(f"a sweep directory is given twice: {' '.join(map(str, roots))}")
+    sweeps = [open_sweep(root) for root in roots]
+    selected = set(select_runs([r.name for s in sweeps for r in s.runs], args.only, args.skip))
+    chosen = [tuple(r.name for r in s.runs if r.name in selected) for s in sweeps]
+    if args.dry_run:
+        for sweep, names in zip(sweeps, chosen, strict=True):
+            _list_runs(sweep, names, prefix=f"{sweep.root.name}/")
+        return None
+    return sweeps, chosen
+
+
+def _list_runs(sweep: Any, chosen: tuple[str, ...], prefix: str) -> None:
+    for status in sweep.statuses():
+        left_out = "" if status.name in chosen else "  (left out)"
+        print(f"{prefix}{status.name}  {status.state}{left_out}")
 
 
 def _print_failed(sweep: Any, failed: list[Any]) -> None:

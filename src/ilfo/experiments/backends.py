@@ -291,6 +291,9 @@ class RayBackend:
 
 
 # ------------------------------------------------------------------------------ scheduler
+_Key = tuple[int, str]  # (the sweep's index, the run's name)
+
+
 def run_sweep(
     sweep: Sweep,
     backend: Backend,
@@ -303,11 +306,10 @@ def run_sweep(
     final status. ``names`` limits that to some runs (``select_runs``; the others are left
     as they are, and still reported). ``on_change(statuses, message)`` is called at each start
     and end (and about every ``poll_seconds`` with an empty message) for progress display."""
-    in_sweep = {run.name for run in sweep.runs}
-    chosen = set(in_sweep if names is None else names)
-    if unknown := chosen - in_sweep:
-        raise KeyError(f"{sweep.root} has no runs named {sorted(unknown)}")
-    return _schedule([sweep], {(0, name) for name in chosen}, backend, poll_seconds, on_change)
+    chosen = None if names is None else [names]
+    return run_sweeps(
+        [sweep], backend, poll_seconds=poll_seconds, on_change=on_change, names=chosen
+    )
 
 
 def run_sweeps(
@@ -316,21 +318,28 @@ def run_sweeps(
     *,
     poll_seconds: float = 1.0,
     on_change: Callable[[list[RunStatus], str], None] | None = None,
+    names: Sequence[Collection[str]] | None = None,
 ) -> list[RunStatus]:
     """``run_sweep`` over several sweeps as one queue, in their order: a slot that one sweep's
     last runs leave free (or its runs that another process trains) takes the next sweep's
     runs at once, rather than idling until the sweep ends (a run that is retried or comes free
-    again rejoins the queue after its own sweep's runs, before later sweeps'). Returns every
-    run's final status, sweep by sweep; with several sweeps, the messages name runs as
-    ``<sweep directory's name>/<run>``."""
+    again rejoins the queue after its own sweep's runs, before later sweeps'). ``names``, one
+    collection per sweep, limits each to those runs. Returns every run's final status, sweep
+    by sweep; with several sweeps, the messages name runs as ``<sweep directory's
+    name>/<run>``."""
     roots = [sweep.root.resolve() for sweep in sweeps]
     if len(set(roots)) != len(roots):
         raise ValueError(f"a sweep is given twice: {[str(s.root) for s in sweeps]}")
-    chosen = {(i, run.name) for i, sweep in enumerate(sweeps) for run in sweep.runs}
+    if names is not None and len(names) != len(sweeps):
+        raise ValueError(f"names has {len(names)} collections for {len(sweeps)} sweeps")
+    chosen: set[_Key] = set()
+    for i, sweep in enumerate(sweeps):
+        in_sweep = {run.name for run in sweep.runs}
+        wanted = set(in_sweep if names is None else names[i])
+        if unknown := wanted - in_sweep:
+            raise KeyError(f"{sweep.root} has no runs named {sorted(unknown)}")
+        chosen |= {(i, name) for name in wanted}
     return _schedule(list(sweeps), chosen, backend, poll_seconds, on_change)
-
-
-_Key = tuple[int, str]  # (the sweep's index, the run's name)
 
 
 def _schedule(
