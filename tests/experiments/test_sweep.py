@@ -718,7 +718,8 @@ def test_run_sweeps_limits_each_sweep_to_its_names(tmp_path):
 
 def test_cli_continues_several_sweeps_as_one_queue(tmp_path, monkeypatch, capsys):
     """`ilfo sweep run A B`: both sweeps' runs through one scheduler and backend, in order;
-    --only/--skip, --retry-failed, --dry-run and the exit status cover both."""
+    --only/--skip, --retry-failed, --dry-run and the exit status cover both, and so does
+    `ilfo sweep status A B`."""
     from ilfo.cli import main
 
     one = create_sweep(tmp_path / "one", SweepSpec(seed=(0, 1), config=TINY))
@@ -744,6 +745,23 @@ def test_cli_continues_several_sweeps_as_one_queue(tmp_path, monkeypatch, capsys
     assert backend.started == [b, c]
     assert f"sweep {two.root}: 2 runs" in out and "running 1 of them" in out
     assert f"failed: {c}: ValueError: boom" in out
+    assert main(["sweep", "status", *dirs]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split()[:2] for line in lines[:4]] == [
+        [f"one/{a}", "done"],
+        [f"one/{b}", "done"],
+        [f"two/{c}", "failed"],
+        [f"two/{d}", "pending"],
+    ]
+    assert "2 done, 0 running, 1 failed, 1 pending" in lines[4]  # one bar over both
+    assert main(["sweep", "status", *dirs, "--json"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [(r["sweep"], r["name"]) for r in rows] == [
+        (str(one.root), a),
+        (str(one.root), b),
+        (str(two.root), c),
+        (str(two.root), d),
+    ]
     assert main(["sweep", "run", *dirs, "--retry-failed", "--no-progress"]) == 0
     assert backend.started == [b, c, c, d]
     assert all(s.state == "done" for sweep in (one, two) for s in sweep.statuses())

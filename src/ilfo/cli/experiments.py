@@ -82,7 +82,9 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.set_defaults(run=_run_sweep, takes_train_flags=True)
     status = actions.add_parser("status", help="Show each run's state and the sweep's progress.")
-    status.add_argument("dir", help="a sweep directory")
+    status.add_argument(
+        "dir", nargs="+", metavar="DIR", help="a sweep directory, or several (one bar over all)"
+    )
     status.add_argument("--json", action="store_true", help="one JSON object per run")
     status.set_defaults(run=_run_sweep_status)
     snapshot = actions.add_parser(
@@ -308,14 +310,20 @@ class _Progress:
 def _run_sweep_status(args: argparse.Namespace) -> int:
     from ilfo.experiments import open_sweep, progress_line, summary
 
-    sweep = open_sweep(args.dir)
-    statuses = sweep.statuses()
+    sweeps = [open_sweep(d) for d in args.dir]
+    several = len(sweeps) > 1
+    rows = [  # (the name shown, the status, the sweep's directory)
+        (f"{sweep.root.name}/{s.name}" if several else s.name, s, sweep.root)
+        for sweep in sweeps
+        for s in sweep.statuses()
+    ]
     if args.json:
-        for status in statuses:
-            print(json.dumps({**status.__dict__, "hours_left": status.hours_left}))
+        for _, status, root in rows:
+            where = {"sweep": str(root)} if several else {}
+            print(json.dumps({**where, **status.__dict__, "hours_left": status.hours_left}))
         return 0
-    width = max(len(s.name) for s in statuses)
-    for s in statuses:
+    width = max(len(name) for name, _, _ in rows)
+    for name, s, _ in rows:
         error = f"  {s.error}" if s.error and s.state != "done" else ""
         failures = f"  failures {s.failures}" if s.failures else ""
         speed = (
@@ -323,7 +331,8 @@ def _run_sweep_status(args: argparse.Namespace) -> int:
             if s.hours_left is not None
             else ""
         )
-        print(f"{s.name:<{width}}  {s.state:<7}  {s.step:>9,}/{s.steps:,}{speed}{failures}{error}")
+        print(f"{name:<{width}}  {s.state:<7}  {s.step:>9,}/{s.steps:,}{speed}{failures}{error}")
+    statuses = [s for _, s, _ in rows]
     counts = summary(statuses)
     share = counts["steps_done"] / max(1, counts["steps_total"])
     bar = "#" * round(30 * share)
