@@ -702,18 +702,31 @@ def test_a_retried_run_goes_before_later_sweeps_runs(tmp_path):
 
 
 def test_run_sweeps_limits_each_sweep_to_its_names(tmp_path):
+    """The same run names in two sweeps: each sweep runs its own chosen ones only."""
     one = create_sweep(tmp_path / "one", SweepSpec(seed=(0, 1), config=TINY))
-    two = create_sweep(tmp_path / "two", SweepSpec(seed=(2, 3), config=TINY))
+    two = create_sweep(tmp_path / "two", SweepSpec(seed=(0, 1), config={**TINY, "steps": 600}))
     a, b = (r.name for r in one.runs)
-    _, d = (r.name for r in two.runs)
-    backend = _FakeBackend({a: ["done"], d: ["done"]})
-    final = run_sweeps([one, two], backend, poll_seconds=0, names=[[a], [d]])
-    assert backend.started == [a, d]
+    assert [r.name for r in two.runs] == [a, b]
+    backend = _FakeBackend({a: ["done"], b: ["done"]})
+    final = run_sweeps([one, two], backend, poll_seconds=0, names=[[a], [b]])
+    assert backend.started == [a, b]
     assert [s.state for s in final] == ["done", "pending", "pending", "done"]
     with pytest.raises(KeyError, match="no runs named"):
-        run_sweeps([one, two], backend, poll_seconds=0, names=[[b], [a]])
-    with pytest.raises(ValueError, match="1 collections for 2 sweeps"):
-        run_sweeps([one, two], backend, poll_seconds=0, names=[[b]])
+        run_sweeps([one, two], backend, poll_seconds=0, names=[[a], ["nope"]])
+    for wrong in ([[a]], [a, b]):  # one collection short; names, not collections
+        with pytest.raises(ValueError, match="one collection of run names per sweep"):
+            run_sweeps([one, two], backend, poll_seconds=0, names=wrong)
+
+
+def test_sweep_labels_are_directory_names_or_paths_where_two_share_one(tmp_path):
+    from ilfo.experiments import sweep_labels
+
+    sweeps = [
+        create_sweep(tmp_path / d, SweepSpec(config=TINY)) for d in ("x/sweep", "y/sweep", "z")
+    ]
+    assert sweep_labels(sweeps) == [str(tmp_path / "x/sweep"), str(tmp_path / "y/sweep"), "z"]
+    here = open_sweep(Path(os.path.relpath(sweeps[2].root)))
+    assert sweep_labels([here, sweeps[0]]) == ["z", "sweep"]
 
 
 def test_cli_continues_several_sweeps_as_one_queue(tmp_path, monkeypatch, capsys):
@@ -743,6 +756,7 @@ def test_cli_continues_several_sweeps_as_one_queue(tmp_path, monkeypatch, capsys
     assert main(["sweep", "run", *dirs, "--skip", "*__6", "--no-progress"]) == 1
     out = capsys.readouterr().out
     assert backend.started == [b, c]
+    assert backend.watched == [one.root, two.root]  # one queue over both, not one per sweep
     assert f"sweep {two.root}: 2 runs" in out and "running 1 of them" in out
     assert f"failed: {c}: ValueError: boom" in out
     assert main(["sweep", "status", *dirs]) == 0
@@ -762,8 +776,13 @@ def test_cli_continues_several_sweeps_as_one_queue(tmp_path, monkeypatch, capsys
         (str(two.root), c),
         (str(two.root), d),
     ]
+    # --retry-failed forgets the failures of the runs it runs, not of those left out (whose
+    # failure still fails the command)
+    assert main(["sweep", "run", *dirs, "--retry-failed", "--only", "*__6", "--no-progress"]) == 1
+    assert backend.started == [b, c, d]
+    assert f"failed: {c}" in capsys.readouterr().out
     assert main(["sweep", "run", *dirs, "--retry-failed", "--no-progress"]) == 0
-    assert backend.started == [b, c, c, d]
+    assert backend.started == [b, c, d, c]
     assert all(s.state == "done" for sweep in (one, two) for s in sweep.statuses())
 
 
@@ -789,6 +808,10 @@ def test_cli_refuses_to_change_several_sweeps_at_once(tmp_path, capsys):
     assert "is not a sweep directory" in capsys.readouterr().err
     assert main(["sweep", "run", *dirs, "--only", "Walker2d-v5__*", "--dry-run"]) == 2
     assert "no run matches 'Walker2d-v5__*'" in capsys.readouterr().err
+    assert main(["sweep", "run", dirs[0], "--dry-run", dirs[1]]) == 2  # a DIR after the flags
+    assert "the sweep directories go first" in capsys.readouterr().err
+    assert main(["sweep", "status", dirs[0], dirs[0]]) == 2
+    assert "given twice" in capsys.readouterr().err
     assert open_sweep(one.root).spec == one.spec and not (tmp_path / "none").exists()
 
 

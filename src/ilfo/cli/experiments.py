@@ -46,7 +46,8 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
         "dir",
         nargs="+",
         metavar="DIR",
-        help="the sweep directory (created if missing), or several existing ones to continue",
+        help="the sweep directory (created if missing), or several existing ones to continue "
+        "as one queue; before any flag",
     )
     run.add_argument("--spec", default=None, metavar="FILE", help="a sweep spec file")
     run.add_argument("--env", nargs="+", default=None, help="environment ids")
@@ -152,29 +153,39 @@ def _spec_from_args(args: argparse.Namespace, root: Path, rest: list[str]) -> An
 def _run_sweep(args: argparse.Namespace) -> int:
     from ilfo.experiments import progress_line, record_attempt, run_sweeps
 
+    if args.rest and not args.rest[0].startswith("-"):  # a DIR after the flags
+        raise ValueError(
+            f"{args.rest[0]!r} is not a flag: the sweep directories go first "
+            "(ilfo sweep run DIR [DIR ...] [flags])"
+        )
     roots = [Path(d) for d in args.dir]
     make_backend = _backend_factory(args)  # bad --workers or --cores-per-run fail before all
     if len(roots) == 1:
-        chosen_sweeps = _one_sweep(args, roots[0])
+        plan = _one_sweep(args, roots[0])
     else:
-        chosen_sweeps = _several_sweeps(args, roots)
-    if chosen_sweeps is None:  # a dry run, listed
+        plan = _several_sweeps(args, roots)
+    if plan is None:  # a dry run: listed
         return 0
-    sweeps, chosen = chosen_sweeps
+    sweeps, chosen = plan
+    backend = make_backend()  # before failures are forgotten: a missing Ray forgets none
     if args.retry_failed:
-        for sweep in sweeps:
+        for sweep, names in zip(sweeps, chosen, strict=True):
             for status in sweep.statuses():
-                if status.state == "failed":
+                if status.state == "failed" and status.name in names:
                     record_attempt(sweep, status.name, "reset")
-    backend = make_backend()
     at_once = f"{backend.slots} at once ({args.backend})"
     for sweep, names in zip(sweeps, chosen, strict=True):
-        print(f"sweep {sweep.root}: {len(sweep.runs)} runs, {at_once}")
+        print(
+            f"sweep {sweep.root}: {len(sweep.runs)} runs"
+            + (f", {at_once}" if len(sweeps) == 1 else "")
+        )
         if len(names) < len(sweep.runs):
             print(
                 f"running {len(names)} of them (--only/--skip); the other "
                 f"{len(sweep.runs) - len(names)} are left as they are"
             )
+    if len(sweeps) > 1:
+        print(f"{sum(len(s.runs) for s in sweeps)} runs in {len(sweeps)} sweeps, {at_once}")
     statuses = [status for sweep in sweeps for status in sweep.statuses()]
     print(progress_line(statuses))
     display = _Progress(statuses, enabled=not args.no_progress)
@@ -184,18 +195,18 @@ def _run_sweep(args: argparse.Namespace) -> int:
     finally:
         display.close()
     print(progress_line(final))
-    failed = False
-    for sweep in sweeps:  # `final` is sweep by sweep: read each again for its given-up runs
-        given_up = [s for s in sweep.statuses() if s.state == "failed"]
-        _print_failed(sweep, given_up)
-        failed = failed or bool(given_up)
-    return 1 if failed else 0
+    start = 0
+    for sweep in sweeps:  # `final` holds each sweep's runs in turn
+        mine = final[start : start + len(sweep.runs)]
+        start += len(sweep.runs)
+        _print_failed(sweep, [s for s in mine if s.state == "failed"])
+    return 1 if any(s.state == "failed" for s in final) else 0
 
 
-_ChosenRuns = tuple[list[Any], list[tuple[str, ...]]]  # the sweeps, and each one's runs to run
+_SweepPlan = tuple[list[Any], list[tuple[str, ...]]]  # the sweeps, and each one's runs to run
 
 
-def _one_sweep(args: argparse.Namespace, root: Path) -> _ChosenRuns | None:
+def _one_sweep(args: argparse.Namespace, root: Path) -> _SweepPlan | None:
     """The sweep in (or for) ``root``, created from the spec or axes given, and its chosen
     runs; ``None`` after a dry run's listing."""
     from ilfo.experiments import create_sweep, expand, matching_sweep, open_sweep, select_runs
@@ -219,11 +230,11 @@ def _one_sweep(args: argparse.Namespace, root: Path) -> _ChosenRuns | None:
     return [sweep], [chosen]
 
 
-def _several_sweeps(args: argparse.Namespace, roots: list[Path]) -> _ChosenRuns | None:
+def _several_sweeps(args: argparse.Namespace, roots: list[Path]) -> _SweepPlan | None:
     """Existing sweeps to continue as one queue, and each one's chosen runs (--only and --skip
     apply to all: a pattern must match a run of one of them); ``None`` after a dry run's
     listing."""
-    from ilfo.experiments import open_sweep, select_runs
+    from ilfo.experiments import select_runs, sweep_labels
 
     changes = [
         flag
@@ -244,16 +255,22 @@ def _several_sweeps(args: argparse.Namespace, roots: list[Path]) -> _ChosenRuns 
             f"several sweep directories are continued as they are; {', '.join(changes)} "
             "make or change one sweep: give one DIR"
         )
-    if len({root.resolve() for root in roots}) < len(roots):
-        raise ValueError(f"a sweep directory is given twice: {' '.join(map(str, roots))}")
-    sweeps = [open_sweep(root) for root in roots]
+    sweeps = _open_sweeps(roots)
     selected = set(select_runs([r.name for s in sweeps for r in s.runs], args.only, args.skip))
     chosen = [tuple(r.name for r in s.runs if r.name in selected) for s in sweeps]
     if args.dry_run:
-        for sweep, names in zip(sweeps, chosen, strict=True):
-            _list_runs(sweep, names, prefix=f"{sweep.root.name}/")
+        for sweep, names, label in zip(sweeps, chosen, sweep_labels(sweeps), strict=True):
+            _list_runs(sweep, names, prefix=f"{label}/")
         return None
     return sweeps, chosen
+
+
+def _open_sweeps(roots: list[Path]) -> list[Any]:
+    if len({root.resolve() for root in roots}) < len(roots):
+        raise ValueError(f"a sweep directory is given twice: {' '.join(map(str, roots))}")
+    from ilfo.experiments import open_sweep
+
+    return [open_sweep(root) for root in roots]
 
 
 def _list_runs(sweep: Any, chosen: tuple[str, ...], prefix: str) -> None:
@@ -308,19 +325,20 @@ class _Progress:
 
 
 def _run_sweep_status(args: argparse.Namespace) -> int:
-    from ilfo.experiments import open_sweep, progress_line, summary
+    from ilfo.experiments import progress_line, summary, sweep_labels
 
-    sweeps = [open_sweep(d) for d in args.dir]
+    sweeps = _open_sweeps([Path(d) for d in args.dir])
     several = len(sweeps) > 1
     rows = [  # (the name shown, the status, the sweep's directory)
-        (f"{sweep.root.name}/{s.name}" if several else s.name, s, sweep.root)
-        for sweep in sweeps
+        (f"{label}/{s.name}" if several else s.name, s, sweep.root)
+        for sweep, label in zip(sweeps, sweep_labels(sweeps), strict=True)
         for s in sweep.statuses()
     ]
     if args.json:
         for _, status, root in rows:
-            where = {"sweep": str(root)} if several else {}
-            print(json.dumps({**where, **status.__dict__, "hours_left": status.hours_left}))
+            print(
+                json.dumps({"sweep": str(root), **status.__dict__, "hours_left": status.hours_left})
+            )
         return 0
     width = max(len(name) for name, _, _ in rows)
     for name, s, _ in rows:

@@ -25,6 +25,7 @@ from ilfo.experiments.sweep import (
     select_runs,
     snapshot_sweep,
     summary,
+    sweep_labels,
 )
 
 __all__ = [
@@ -48,4 +49,5 @@ __all__ = [
     "select_runs",
     "snapshot_sweep",
     "summary",
+    "sweep_labels",
 ]

@@ -32,6 +32,7 @@ from ilfo.experiments.sweep import (
     record_attempt,
     run_status,
     summary,
+    sweep_labels,
 )
 from ilfo.experiments.worker import EXIT_BUSY, PARENT_SIGNAL_ENV, thread_environment
 
@@ -325,13 +326,13 @@ def run_sweeps(
     runs at once, rather than idling until the sweep ends (a run that is retried or comes free
     again rejoins the queue after its own sweep's runs, before later sweeps'). ``names``, one
     collection per sweep, limits each to those runs. Returns every run's final status, sweep
-    by sweep; with several sweeps, the messages name runs as ``<sweep directory's
-    name>/<run>``."""
+    by sweep; with several sweeps, the messages name runs as ``<label>/<run>``
+    (``sweep_labels``)."""
     roots = [sweep.root.resolve() for sweep in sweeps]
     if len(set(roots)) != len(roots):
         raise ValueError(f"a sweep is given twice: {[str(s.root) for s in sweeps]}")
-    if names is not None and len(names) != len(sweeps):
-        raise ValueError(f"names has {len(names)} collections for {len(sweeps)} sweeps")
+    if names is not None and (len(names) != len(sweeps) or any(isinstance(n, str) for n in names)):
+        raise ValueError(f"names must be one collection of run names per sweep, got {names!r}")
     chosen: set[_Key] = set()
     for i, sweep in enumerate(sweeps):
         in_sweep = {run.name for run in sweep.runs}
@@ -359,8 +360,10 @@ def _schedule(
     notify = on_change or (lambda statuses, message: None)
     last_progress = time.monotonic()
 
+    labels = sweep_labels(sweeps)
+
     def label(key: _Key) -> str:
-        return key[1] if len(sweeps) == 1 else f"{sweeps[key[0]].root.name}/{key[1]}"
+        return key[1] if len(sweeps) == 1 else f"{labels[key[0]]}/{key[1]}"
 
     def refresh(key: _Key) -> RunStatus:
         statuses[key] = run_status(sweeps[key[0]], runs[key])

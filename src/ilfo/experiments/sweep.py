@@ -297,6 +297,17 @@ def select_runs(
     )
 
 
+def sweep_labels(sweeps: Sequence[Sweep]) -> list[str]:
+    """Short names for several sweeps in listings and messages (``LABEL/RUN``): each
+    directory's own name, or the path as given where two share a name (``exp1/sweep``,
+    ``exp2/sweep``)."""
+    names = [sweep.root.resolve().name for sweep in sweeps]
+    return [
+        name if names.count(name) == 1 else str(sweep.root)
+        for name, sweep in zip(names, sweeps, strict=True)
+    ]
+
+
 def create_sweep(root: str | Path, spec: SweepSpec) -> Sweep:
     """Write the manifest of ``spec`` to ``root`` (made if missing). A directory that holds a
     sweep already is reused only for the same spec, whose ``retries`` alone may change
