@@ -3,6 +3,7 @@ bookkeeping (with a fake backend), and one real local sweep killed and started a
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import os
@@ -876,3 +877,53 @@ def test_an_attempt_record_after_a_torn_line_is_kept(tmp_path):
         f.write('{"event": "en')  # a kill mid-write
     record_attempt(sweep, run, "end", status="killed")
     assert [e["event"] for e in read_attempts(sweep, run)] == ["start", "end"]
+
+
+def test_cli_create_writes_a_sweep_to_queue_behind_others_without_running_it(
+    tmp_path, monkeypatch, capsys
+):
+    """`ilfo sweep create`: the manifest `sweep run` would write, no run started; the same
+    sweep again is left as it is, another refused, and `sweep run A NEW` queues it."""
+    from ilfo.cli import main
+
+    def no_backend(args):
+        raise AssertionError("create made a backend")
+
+    monkeypatch.setattr("ilfo.cli.experiments._backend_factory", no_backend)
+    spec_file = tmp_path / "spec.json"
+    spec_file.write_text(json.dumps({"env": ["Hopper-v5"], "seed": "0-1", "config": TINY}))
+    root = tmp_path / "new"
+    given = ["--spec", str(spec_file), "--td3-tau", "0.01"]
+    assert main(["sweep", "create", str(root), *given]) == 0
+    out = capsys.readouterr().out.splitlines()
+    names = ["Hopper-v5__oops-td3__demos1__0", "Hopper-v5__oops-td3__demos1__1"]
+    assert out[0] == f"sweep {root}: 2 runs"
+    assert out[1:3] == [f"{name}  pending" for name in names]
+    created = open_sweep(root)
+    expected = SweepSpec(env=("Hopper-v5",), seed=(0, 1), config={**TINY, "td3": {"tau": 0.01}})
+    assert created.spec == expected and [r.name for r in created.runs] == names
+    assert created.runs[0].config["td3"]["tau"] == 0.01
+    assert not any((root / "runs").iterdir()) and not any((root / "attempts").iterdir())
+    # The same sweep: left as it is (its retries may change); another: refused, unchanged.
+    assert main(["sweep", "create", str(root), *given, "--retries", "5"]) == 0
+    assert "2 runs (there already)" in capsys.readouterr().out
+    assert open_sweep(root).spec == dataclasses.replace(expected, retries=5)
+    assert main(["sweep", "create", str(root), *given, "--seeds", "0-2"]) == 2
+    assert "holds another sweep" in capsys.readouterr().err
+    assert open_sweep(root).spec.seed == (0, 1)
+    # Nothing to create, a bad train flag, a second DIR: refused, and nothing made.
+    fresh = tmp_path / "fresh"
+    for bad in ([], ["--env", "Hopper-v5", "--td3-tau", "x"], ["--spec", str(spec_file), "x"]):
+        with contextlib.suppress(SystemExit):  # argparse exits on a bad train flag
+            assert main(["sweep", "create", str(fresh), *bad]) == 2
+        assert not fresh.exists()
+    err = capsys.readouterr().err
+    assert "nothing to create" in err and "invalid float value: 'x'" in err
+    assert "'x' is not a flag" in err
+    # Queued behind a running sweep's directory: one queue, in order.
+    first = create_sweep(tmp_path / "first", SweepSpec(seed=(7,), config=TINY))
+    backend = _FakeBackend({first.runs[0].name: ["done"], names[0]: ["done"], names[1]: ["done"]})
+    backend.slots = 1
+    monkeypatch.setattr("ilfo.cli.experiments._backend_factory", lambda args: lambda: backend)
+    assert main(["sweep", "run", str(first.root), str(root), "--no-progress"]) == 0
+    assert backend.started == [first.runs[0].name, *names]

@@ -1,4 +1,4 @@
-"""``ilfo sweep run | status | snapshot``, ``ilfo report``, ``ilfo reproduce``."""
+"""``ilfo sweep run | create | status | snapshot``, ``ilfo report``, ``ilfo reproduce``."""
 
 from __future__ import annotations
 
@@ -49,14 +49,7 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
         help="the sweep directory (created if missing), or several existing ones to continue "
         "as one queue; before any flag",
     )
-    run.add_argument("--spec", default=None, metavar="FILE", help="a sweep spec file")
-    run.add_argument("--env", nargs="+", default=None, help="environment ids")
-    run.add_argument("--algo", nargs="+", default=None, help="algorithms")
-    run.add_argument("--num-demos", nargs="+", type=int, default=None, help="demo counts")
-    run.add_argument("--seeds", nargs="+", default=None, help="seeds, or ranges such as 0-4")
-    run.add_argument(
-        "--retries", type=int, default=None, help="restarts of a run that failed (default 2)"
-    )
+    _add_spec_arguments(run)
     run.add_argument(
         "--retry-failed",
         action="store_true",
@@ -82,6 +75,21 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
     run.add_argument("--dry-run", action="store_true", help="list the runs and stop")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.set_defaults(run=_run_sweep, takes_train_flags=True)
+    create = actions.add_parser(
+        "create",
+        allow_abbrev=False,
+        help="Write a sweep's manifest without running it (to queue it: `ilfo sweep run A B`).",
+        description=(
+            "Write the manifest of a sweep (from --spec or the axis flags, and any `ilfo "
+            "train` flag, as `ilfo sweep run` takes them) and list its runs, without running "
+            "any. So a new sweep can be queued behind others: `ilfo sweep run A B` continues "
+            "existing sweeps as one queue. A DIR that holds the same sweep is left as it is "
+            "(its --retries may change); one that holds another is refused."
+        ),
+    )
+    create.add_argument("dir", metavar="DIR", help="the sweep directory (made if missing)")
+    _add_spec_arguments(create)
+    create.set_defaults(run=_run_sweep_create, takes_train_flags=True)
     status = actions.add_parser("status", help="Show each run's state and the sweep's progress.")
     status.add_argument(
         "dir", nargs="+", metavar="DIR", help="a sweep directory, or several (one bar over all)"
@@ -103,12 +111,37 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
     snapshot.set_defaults(run=_run_sweep_snapshot)
 
 
+def _add_spec_arguments(p: argparse.ArgumentParser) -> None:
+    """What makes a sweep: a spec file, the axes that change it, and its retries."""
+    p.add_argument("--spec", default=None, metavar="FILE", help="a sweep spec file")
+    p.add_argument("--env", nargs="+", default=None, help="environment ids")
+    p.add_argument("--algo", nargs="+", default=None, help="algorithms")
+    p.add_argument("--num-demos", nargs="+", type=int, default=None, help="demo counts")
+    p.add_argument("--seeds", nargs="+", default=None, help="seeds, or ranges such as 0-4")
+    p.add_argument(
+        "--retries", type=int, default=None, help="restarts of a run that failed (default 2)"
+    )
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
+def _check_flags_follow_dirs(rest: list[str]) -> None:
+    """argparse leaves a positional given after the flags among the unknown arguments."""
+    if rest and not rest[0].startswith("-"):
+        raise ValueError(
+            f"{rest[0]!r} is not a flag: the sweep directories go first "
+            "(ilfo sweep run|create DIR ... [flags])"
+        )
+
+
 def _train_settings(rest: list[str]) -> dict[str, Any]:
     """The `ilfo train` flags among a sweep's arguments, as sweep-config settings."""
     from ilfo.cli.train import _add_train_parser, part_flags, settings_from_args
     from ilfo.training import TrainConfig
 
-    parser = Parser(prog="ilfo sweep run DIR [ilfo train flags]")
+    parser = Parser(prog="ilfo sweep run|create DIR [ilfo train flags]")
     commands = parser.add_subparsers()
     _add_train_parser(commands)
     commands.choices["train"].help_command = "ilfo train"  # its prog is no command
@@ -153,11 +186,7 @@ def _spec_from_args(args: argparse.Namespace, root: Path, rest: list[str]) -> An
 def _run_sweep(args: argparse.Namespace) -> int:
     from ilfo.experiments import progress_line, record_attempt, run_sweeps
 
-    if args.rest and not args.rest[0].startswith("-"):  # a DIR after the flags
-        raise ValueError(
-            f"{args.rest[0]!r} is not a flag: the sweep directories go first "
-            "(ilfo sweep run DIR [DIR ...] [flags])"
-        )
+    _check_flags_follow_dirs(args.rest)
     roots = [Path(d) for d in args.dir]
     make_backend = _backend_factory(args)  # bad --workers or --cores-per-run fail before all
     if len(roots) == 1:
@@ -176,7 +205,7 @@ def _run_sweep(args: argparse.Namespace) -> int:
     at_once = f"{backend.slots} at once ({args.backend})"
     for sweep, names in zip(sweeps, chosen, strict=True):
         print(
-            f"sweep {sweep.root}: {len(sweep.runs)} runs"
+            f"sweep {sweep.root}: {_count(len(sweep.runs), 'run')}"
             + (f", {at_once}" if len(sweeps) == 1 else "")
         )
         if len(names) < len(sweep.runs):
@@ -228,6 +257,27 @@ def _one_sweep(args: argparse.Namespace, root: Path) -> _SweepPlan | None:
         sweep = create_sweep(root, spec)
     assert sweep is not None
     return [sweep], [chosen]
+
+
+def _run_sweep_create(args: argparse.Namespace) -> int:
+    from ilfo.experiments import create_sweep, matching_sweep
+
+    _check_flags_follow_dirs(args.rest)
+    root = Path(args.dir)
+    spec = _spec_from_args(args, root, list(args.rest))
+    if spec is None:
+        raise ValueError(
+            "nothing to create: give --spec FILE or the axis flags (--env, --algo, "
+            "--num-demos, --seeds) and any `ilfo train` flag"
+        )
+    existed = matching_sweep(root, spec) is not None  # another sweep there is refused
+    sweep = create_sweep(root, spec)
+    print(
+        f"sweep {root}: {_count(len(sweep.runs), 'run')}" + (" (there already)" if existed else "")
+    )
+    _list_runs(sweep, tuple(run.name for run in sweep.runs), prefix="")
+    print(f"run it with `ilfo sweep run {root}`, or queue it: `ilfo sweep run OTHER... {root}`")
+    return 0
 
 
 def _several_sweeps(args: argparse.Namespace, roots: list[Path]) -> _SweepPlan | None:
