@@ -3,7 +3,6 @@ bookkeeping (with a fake backend), and one real local sweep killed and started a
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import json
 import os
@@ -895,32 +894,54 @@ def test_cli_create_writes_a_sweep_to_queue_behind_others_without_running_it(
     root = tmp_path / "new"
     given = ["--spec", str(spec_file), "--td3-tau", "0.01"]
     assert main(["sweep", "create", str(root), *given]) == 0
-    out = capsys.readouterr().out.splitlines()
     names = ["Hopper-v5__oops-td3__demos1__0", "Hopper-v5__oops-td3__demos1__1"]
-    assert out[0] == f"sweep {root}: 2 runs"
-    assert out[1:3] == [f"{name}  pending" for name in names]
+    assert capsys.readouterr().out.splitlines() == [
+        f"sweep {root}: 2 runs",
+        *(f"{name}  pending" for name in names),
+        f"run it: ilfo sweep run {root}; or queue it: ilfo sweep run OTHER... {root}",
+    ]
     created = open_sweep(root)
     expected = SweepSpec(env=("Hopper-v5",), seed=(0, 1), config={**TINY, "td3": {"tau": 0.01}})
     assert created.spec == expected and [r.name for r in created.runs] == names
     assert created.runs[0].config["td3"]["tau"] == 0.01
     assert not any((root / "runs").iterdir()) and not any((root / "attempts").iterdir())
-    # The same sweep: left as it is (its retries may change); another: refused, unchanged.
+    # The same sweep: left as it is; --retries changes its retries, and they stay changed
+    # when the sweep is given again without it.
     assert main(["sweep", "create", str(root), *given, "--retries", "5"]) == 0
+    assert "2 runs (there already; retries 2 -> 5)" in capsys.readouterr().out
+    assert main(["sweep", "create", str(root), *given]) == 0
     assert "2 runs (there already)" in capsys.readouterr().out
     assert open_sweep(root).spec == dataclasses.replace(expected, retries=5)
+    assert main(["sweep", "create", str(root), "--retries", "6"]) == 0  # alone: this sweep's
+    assert open_sweep(root).spec == dataclasses.replace(expected, retries=6)
+    # Another sweep there: refused, the manifest unchanged.
     assert main(["sweep", "create", str(root), *given, "--seeds", "0-2"]) == 2
     assert "holds another sweep" in capsys.readouterr().err
-    assert open_sweep(root).spec.seed == (0, 1)
-    # Nothing to create, a bad train flag, a second DIR: refused, and nothing made.
+    assert open_sweep(root).spec == dataclasses.replace(expected, retries=6)
+    # Refused, with nothing made: nothing to create, --retries alone, a second DIR, a bad
+    # train flag (argparse's exit), a folder of other files, a file.
     fresh = tmp_path / "fresh"
-    for bad in ([], ["--env", "Hopper-v5", "--td3-tau", "x"], ["--spec", str(spec_file), "x"]):
-        with contextlib.suppress(SystemExit):  # argparse exits on a bad train flag
-            assert main(["sweep", "create", str(fresh), *bad]) == 2
+    refusals = {
+        (): "nothing to create",
+        ("--retries", "3"): "--retries alone changes an existing sweep",
+        ("other", "--spec", str(spec_file)): "ilfo sweep create takes one DIR",
+    }
+    for bad, message in refusals.items():
+        assert main(["sweep", "create", str(fresh), *bad]) == 2
+        assert message in capsys.readouterr().err
         assert not fresh.exists()
-    err = capsys.readouterr().err
-    assert "nothing to create" in err and "invalid float value: 'x'" in err
-    assert "'x' is not a flag" in err
-    # Queued behind a running sweep's directory: one queue, in order.
+    with pytest.raises(SystemExit) as exit_:
+        main(["sweep", "create", str(fresh), "--env", "Hopper-v5", "--td3-tau", "x"])
+    assert exit_.value.code == 2 and not fresh.exists()
+    assert "invalid float value: 'x'" in capsys.readouterr().err
+    fresh.mkdir()
+    (fresh / "notes.txt").write_text("mine")
+    assert main(["sweep", "create", str(fresh), *given]) == 2
+    assert "holds other files and no sweep (notes.txt)" in capsys.readouterr().err
+    assert sorted(p.name for p in fresh.iterdir()) == ["notes.txt"]
+    assert main(["sweep", "create", str(fresh / "notes.txt"), *given]) == 2
+    assert "is a file, not a sweep directory" in capsys.readouterr().err
+    # Queued behind another sweep: one queue, in order.
     first = create_sweep(tmp_path / "first", SweepSpec(seed=(7,), config=TINY))
     backend = _FakeBackend({first.runs[0].name: ["done"], names[0]: ["done"], names[1]: ["done"]})
     backend.slots = 1

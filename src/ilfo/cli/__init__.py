@@ -1,7 +1,7 @@
 """The ``ilfo`` command line: thin wrappers over the library, one module per command group
 (``train``: train, eval, plot, snapshot; ``experts``: expert train / export / eval; ``data``:
-reward, demos info / convert / collect, label; ``experiments``: sweep run / status / snapshot,
-report, reproduce)."""
+reward, demos info / convert / collect, label; ``experiments``: sweep run / create / status /
+snapshot, report, reproduce)."""
 
 from __future__ import annotations
 

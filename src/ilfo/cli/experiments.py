@@ -11,11 +11,19 @@ from typing import Any
 from ilfo.cli._common import Parser, stop_signals_interrupt
 from ilfo.config import overrides_from_args
 
+_SPEC_FILE_HELP = (
+    'Spec file (JSON or TOML): {"env": [...], "algo": [...], "num_demos": [1, 4, 10], '
+    '"seed": "0-4", "config": {"steps": 1000000, "preset": "fast"}, "variants": '
+    '{"lambda0.1": {"oops": {"reg": 0.1}}}, "retries": 2}; config may name a settings file '
+    "(a run's config.json, whose env, algo, demos, seed and out the sweep sets)."
+)
+
 
 def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "sweep",
-        help="Run many runs (env x algo x demos x seed), resumable; or show a sweep's status.",
+        help="Run many runs (env x algo x demos x seed), resumable; create, show or snapshot "
+        "a sweep.",
         description="A sweep directory holds a manifest of runs and each run's directory; "
         "`ilfo sweep run` trains the unfinished ones and can be stopped and started again at "
         "any point without losing work.",
@@ -36,11 +44,7 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
             "order (a core that one sweep's last runs leave free takes the next's). Ctrl-C "
             "checkpoints every run and stops."
         ),
-        epilog='Spec file (JSON or TOML): {"env": [...], "algo": [...], "num_demos": '
-        '[1, 4, 10], "seed": "0-4", "config": {"steps": 1000000, "preset": "fast"}, '
-        '"variants": {"lambda0.1": {"oops": {"reg": 0.1}}}, "retries": 2}; config may '
-        "name a settings file (a run's config.json, whose env, algo, demos, seed and out the "
-        "sweep sets).",
+        epilog=_SPEC_FILE_HELP,
     )
     run.add_argument(
         "dir",
@@ -82,12 +86,16 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
         description=(
             "Write the manifest of a sweep (from --spec or the axis flags, and any `ilfo "
             "train` flag, as `ilfo sweep run` takes them) and list its runs, without running "
-            "any. So a new sweep can be queued behind others: `ilfo sweep run A B` continues "
-            "existing sweeps as one queue. A DIR that holds the same sweep is left as it is "
-            "(its --retries may change); one that holds another is refused."
+            "any. So a new sweep can be queued behind a running one: stop `ilfo sweep run A` "
+            "(Ctrl-C checkpoints its runs) and start `ilfo sweep run A NEW`, which continues "
+            "both as one queue. A DIR that holds the same sweep is left as it is (--retries "
+            "may change its retries); one that holds another sweep, or other files, is refused."
         ),
+        epilog=_SPEC_FILE_HELP,
     )
-    create.add_argument("dir", metavar="DIR", help="the sweep directory (made if missing)")
+    create.add_argument(
+        "dir", metavar="DIR", help="the new sweep's directory (made if missing); before any flag"
+    )
     _add_spec_arguments(create)
     create.set_defaults(run=_run_sweep_create, takes_train_flags=True)
     status = actions.add_parser("status", help="Show each run's state and the sweep's progress.")
@@ -127,27 +135,32 @@ def _count(n: int, noun: str) -> str:
     return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
-def _check_flags_follow_dirs(rest: list[str]) -> None:
-    """argparse leaves a positional given after the flags among the unknown arguments."""
-    if rest and not rest[0].startswith("-"):
+def _check_flags_follow_dirs(args: argparse.Namespace) -> None:
+    """argparse leaves a positional that is not one of the command's among the unknown
+    arguments: a DIR after the flags, or a second DIR of `create`."""
+    if args.rest and not args.rest[0].startswith("-"):
+        if args.sweep_command == "create":
+            raise ValueError(
+                f"{args.rest[0]!r} is not a flag: ilfo sweep create takes one DIR, before the flags"
+            )
         raise ValueError(
-            f"{rest[0]!r} is not a flag: the sweep directories go first "
-            "(ilfo sweep run|create DIR ... [flags])"
+            f"{args.rest[0]!r} is not a flag: the sweep directories go first "
+            "(ilfo sweep run DIR [DIR ...] [flags])"
         )
 
 
-def _train_settings(rest: list[str]) -> dict[str, Any]:
+def _train_settings(rest: list[str], command: str) -> dict[str, Any]:
     """The `ilfo train` flags among a sweep's arguments, as sweep-config settings."""
     from ilfo.cli.train import _add_train_parser, part_flags, settings_from_args
     from ilfo.training import TrainConfig
 
-    parser = Parser(prog="ilfo sweep run|create DIR [ilfo train flags]")
+    parser = Parser(prog=f"ilfo sweep {command} DIR [ilfo train flags]")
     commands = parser.add_subparsers()
     _add_train_parser(commands)
     commands.choices["train"].help_command = "ilfo train"  # its prog is no command
     args = parser.parse_args(["train", *rest])
     if args.resume is not None:
-        raise ValueError("ilfo sweep run resumes its runs itself: drop --resume")
+        raise ValueError("a sweep's runs resume themselves (ilfo sweep run): drop --resume")
     # The sweep's axes and directory decide these, whatever the config file says.
     drop = ("env", "algo", "num_demos", "seed", "out")
     overrides = overrides_from_args(args, TrainConfig)
@@ -168,25 +181,33 @@ def _spec_from_args(args: argparse.Namespace, root: Path, rest: list[str]) -> An
         "seed": None if args.seeds is None else parse_seeds(args.seeds),
     }
     given = {k: v for k, v in axes.items() if v is not None}
+    manifest = root / MANIFEST_FILE
     if args.spec is None and not given and not rest:
         if args.retries is None:
             return None
-        if (root / MANIFEST_FILE).is_file():  # the sweep there, with other retries
-            return dataclasses.replace(open_sweep(root).spec, retries=args.retries)
+        if not manifest.is_file():
+            raise FileNotFoundError(
+                f"{root} is not a sweep directory (no {MANIFEST_FILE}): --retries alone "
+                "changes an existing sweep; give --spec FILE or the axis flags for a new one"
+            )
+        return dataclasses.replace(open_sweep(root).spec, retries=args.retries)
     raw: dict[str, Any] = read_settings_file(args.spec) if args.spec else {}
     spec = SweepSpec.from_dict(raw, args.spec or "the command line")
     # A flag changes its one field of a part (--td3-tau), not the spec file's whole part.
-    config = merge_settings(spec.config, _train_settings(rest)) if rest else dict(spec.config)
-    changes: dict[str, Any] = {**given, "config": config}
+    command = args.sweep_command
+    config = merge_settings(spec.config, _train_settings(rest, command)) if rest else spec.config
+    changes: dict[str, Any] = {**given, "config": dict(config)}
     if args.retries is not None:
         changes["retries"] = args.retries
+    elif "retries" not in raw and manifest.is_file():  # the sweep there keeps its own
+        changes["retries"] = open_sweep(root).spec.retries
     return SweepSpec(**{**spec.to_dict(), **changes})
 
 
 def _run_sweep(args: argparse.Namespace) -> int:
     from ilfo.experiments import progress_line, record_attempt, run_sweeps
 
-    _check_flags_follow_dirs(args.rest)
+    _check_flags_follow_dirs(args)
     roots = [Path(d) for d in args.dir]
     make_backend = _backend_factory(args)  # bad --workers or --cores-per-run fail before all
     if len(roots) == 1:
@@ -209,9 +230,10 @@ def _run_sweep(args: argparse.Namespace) -> int:
             + (f", {at_once}" if len(sweeps) == 1 else "")
         )
         if len(names) < len(sweep.runs):
+            left = len(sweep.runs) - len(names)
             print(
-                f"running {len(names)} of them (--only/--skip); the other "
-                f"{len(sweep.runs) - len(names)} are left as they are"
+                f"running {len(names)} of them (--only/--skip); the other {left} "
+                f"{'is' if left == 1 else 'are'} left as they are"
             )
     if len(sweeps) > 1:
         print(f"{sum(len(s.runs) for s in sweeps)} runs in {len(sweeps)} sweeps, {at_once}")
@@ -260,23 +282,33 @@ def _one_sweep(args: argparse.Namespace, root: Path) -> _SweepPlan | None:
 
 
 def _run_sweep_create(args: argparse.Namespace) -> int:
-    from ilfo.experiments import create_sweep, matching_sweep
+    import shlex
 
-    _check_flags_follow_dirs(args.rest)
+    from ilfo.experiments import create_sweep, matching_sweep
+    from ilfo.experiments.sweep import MANIFEST_FILE
+
+    _check_flags_follow_dirs(args)
     root = Path(args.dir)
     spec = _spec_from_args(args, root, list(args.rest))
     if spec is None:
+        there = (root / MANIFEST_FILE).is_file()
         raise ValueError(
-            "nothing to create: give --spec FILE or the axis flags (--env, --algo, "
-            "--num-demos, --seeds) and any `ilfo train` flag"
+            "nothing to create: give --spec FILE, the axis flags (--env, --algo, --num-demos, "
+            "--seeds) or `ilfo train` flags (the axes' defaults apply)"
+            + (f"; {root} holds a sweep already: ilfo sweep status {root}" if there else "")
         )
-    existed = matching_sweep(root, spec) is not None  # another sweep there is refused
+    before = matching_sweep(root, spec)  # another sweep there is refused
     sweep = create_sweep(root, spec)
-    print(
-        f"sweep {root}: {_count(len(sweep.runs), 'run')}" + (" (there already)" if existed else "")
-    )
+    there = ""
+    if before is not None:
+        retries = before.spec.retries
+        there = " (there already" + (
+            f"; retries {retries} -> {spec.retries})" if retries != spec.retries else ")"
+        )
+    print(f"sweep {root}: {_count(len(sweep.runs), 'run')}{there}")
     _list_runs(sweep, tuple(run.name for run in sweep.runs), prefix="")
-    print(f"run it with `ilfo sweep run {root}`, or queue it: `ilfo sweep run OTHER... {root}`")
+    where = shlex.quote(str(root))
+    print(f"run it: ilfo sweep run {where}; or queue it: ilfo sweep run OTHER... {where}")
     return 0
 
 

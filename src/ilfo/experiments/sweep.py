@@ -35,6 +35,8 @@ MANIFEST_FILE = "sweep.json"
 RUNS_DIR = "runs"
 ATTEMPTS_DIR = "attempts"
 LOGS_DIR = "logs"
+SWEEP_PARTS = (RUNS_DIR, ATTEMPTS_DIR, LOGS_DIR)
+"""The folders a sweep directory holds beside its manifest."""
 AXES = ("env", "algo", "num_demos", "seed")
 """The axes of a sweep, besides its named variants."""
 
@@ -311,7 +313,8 @@ def sweep_labels(sweeps: Sequence[Sweep]) -> list[str]:
 def create_sweep(root: str | Path, spec: SweepSpec) -> Sweep:
     """Write the manifest of ``spec`` to ``root`` (made if missing). A directory that holds a
     sweep already is reused only for the same spec, whose ``retries`` alone may change
-    (``open_sweep`` continues it as it is)."""
+    (``open_sweep`` continues it as it is); a file, or a directory that holds anything but a
+    sweep's parts, is refused."""
     root = Path(root)
     runs = tuple(expand(spec))
     manifest = root / MANIFEST_FILE
@@ -323,8 +326,19 @@ def create_sweep(root: str | Path, spec: SweepSpec) -> Sweep:
             write_json_atomic(manifest, raw)
             existing = Sweep(root, spec, existing.runs)
         return existing
+    if root.exists() and not root.is_dir():
+        raise ValueError(f"{root} is a file, not a sweep directory")
+    # A manifest's leftover temporary file or the sweep's own folders: a sweep made before
+    # (whose manifest was lost); anything else is someone's folder.
+    ours = (*SWEEP_PARTS, f".{MANIFEST_FILE}.tmp")
+    others = sorted(p.name for p in root.iterdir() if p.name not in ours) if root.exists() else []
+    if others:
+        raise ValueError(
+            f"{root} holds other files and no sweep ({', '.join(others[:3])}"
+            f"{', ...' if len(others) > 3 else ''}): choose a new or empty directory"
+        )
     root.mkdir(parents=True, exist_ok=True)
-    for sub in (RUNS_DIR, ATTEMPTS_DIR, LOGS_DIR):
+    for sub in SWEEP_PARTS:
         (root / sub).mkdir(exist_ok=True)
     record = {
         "spec": spec.to_dict(),
