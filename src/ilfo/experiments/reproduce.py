@@ -102,11 +102,12 @@ updates were 96% of a step). N updates per step cost (1 - share) + share * N tim
 Measured on TD3 and used for every off-policy algo: an algo whose step goes more to its reward
 (oops-adv-td3, opolo) is costed a little high."""
 
-MEASURE_SECONDS_PER_PAIR: dict[str, float] = {"distances": 5.0, "solvers": 45.0}
+MEASURE_SECONDS_PER_PAIR: dict[str, float] = {"distances": 0.6, "solvers": 45.0}
 """For the estimate only: one core's seconds per (final rollout, expert trajectory) pair of
-each measure, on Hopper (2026-12-06, beside two training runs): Table 3's three exact solves
-took 1-10 s a pair; the solver figure's nine solves (three Sinkhorn ones to their
-20,000-iteration cap) about 50 s a pair (docs/experiments.md)."""
+each measure, on Hopper and Walker2d (2026-12-06, beside one or two training runs): Table 3's
+three exact solves, with the rollouts, 0.5-1.2 s a pair (0.6 on average over the small
+budget's six runs of 100 pairs, 47-120 s a run); the solver figure's nine solves (three
+Sinkhorn ones to their 20,000-iteration cap) about 50 s a pair (docs/experiments.md)."""
 
 
 @dataclass(frozen=True)
