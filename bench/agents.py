@@ -1,11 +1,14 @@
-"""Benchmark TD3 updates per second: ilfo (JAX, jitted lax.scan) against a minimal eager PyTorch
-TD3 with the same networks, and both against the machine's matmul FLOP rate.
+"""Benchmark agent updates per second: ilfo's TD3 and TD7 (JAX, jitted lax.scan), TD3 also
+against a minimal eager PyTorch TD3 with the same networks, and all against the machine's
+matmul FLOP rate.
 
-Cases: presets ``paper`` (actor 256-256, twin critics 1024-1024, batch 100) and ``fast``
+Cases: TD3 presets ``paper`` (actor 256-256, twin critics 1024-1024, batch 100) and ``fast``
 (critics 256-256), both with the PAL loss, critic gradient-norm clipping at 25, time
-augmentation, target policy smoothing, policy delay 2 and Polyak tau 0.003; dims ``hopper``
-(obs 11 + 1 time feature, act 3) and ``humanoid`` (obs 376 + 1, act 17). Batches are drawn
-uniformly from a replay buffer of random transitions (100k by default).
+augmentation, target policy smoothing, policy delay 2 and Polyak tau 0.003; TD7 ``td7`` (the
+authors' sizes: widths 256, batch 256) and ``td7-fast`` (widths 128, batch 100), both with time
+augmentation; dims ``hopper`` (obs 11 + 1 time feature, act 3), ``ant`` (obs 27 + 1, act 8: Ant
+without its contact forces, as imitation observes it) and ``humanoid`` (obs 376 + 1, act 17).
+Batches are drawn uniformly from a replay buffer of random transitions (100k by default).
 
 - ilfo: ``make_td3(...).update(state, data, size, num_updates=N)`` (one jitted scan of N
   updates), timed after a warm-up call so that compilation is excluded; best of ``--repeat``.
@@ -23,6 +26,7 @@ uniformly from a replay buffer of random transitions (100k by default).
     python bench/agents.py --json               # one JSON line per case and implementation
     python bench/agents.py --quick              # smoke run: few updates, one repeat
     python bench/agents.py --presets paper --dims humanoid --no-torch
+    python bench/agents.py --presets fast paper td7 td7-fast --dims ant --no-torch
 
 Without PyTorch installed the ilfo rows are still measured (torch is reported as skipped).
 """
@@ -47,11 +51,18 @@ import numpy as np
 # Keep this folder off the path: bench/ot.py would shadow POT's `ot` for anything importing it.
 sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 from ilfo.agents.td3 import TD3Config, make_td3
+from ilfo.agents.td7 import TD7Config, make_td7
 from ilfo.benchmarking import machine
 from ilfo.replay import ReplayData
 
-DIMS = {"hopper": (11 + 1, 3), "humanoid": (376 + 1, 17)}
-PRESETS = {"paper": TD3Config.paper, "fast": TD3Config.fast}
+DIMS = {"hopper": (11 + 1, 3), "ant": (27 + 1, 8), "humanoid": (376 + 1, 17)}
+PRESETS: dict[str, Callable[[], TD3Config | TD7Config]] = {
+    "paper": TD3Config.paper,
+    "fast": TD3Config.fast,
+    "td7": TD7Config,
+    "td7-fast": TD7Config.fast,
+}
+DEFAULT_DIMS = ("hopper", "humanoid")
 
 
 def _torch_version() -> str:
@@ -92,6 +103,50 @@ def flops_per_update(cfg: TD3Config, obs_dim: int, action_dim: int) -> float:
     critic_step = k * (_mm(critic) + _mm(critic) + _mm(critic[1:]))
     actor_step = _mm(actor) + 2 * _mm(critic) + _mm(actor) + _mm(actor[1:])
     return float(cfg.batch_size * (target + critic_step + actor_step / cfg.policy_delay))
+
+
+def flops_per_update_td7(cfg: TD7Config, obs_dim: int, action_dim: int) -> float:
+    """Matmul FLOPs one TD7 update needs, averaged over the policy delay, counted as
+    ``flops_per_update`` counts TD3's (backward = weight gradients + input gradients of every
+    layer whose input is not data):
+    - encoder step: zs(s') forward, zs(s) and zsa forward and backward;
+    - critic step: the targets' zs(s'), actor, zsa and critics forward; the fixed encoder's
+      zs(s) and zsa forward; the critics forward and backward;
+    - every ``policy_delay`` updates, the actor step: the fixed zs(s), the actor, zsa and the
+      critics forward; the critics' and zsa's input gradients, the actor's backward.
+    Times the batch size."""
+    h_e, h_a, h_c, z, k = (
+        cfg.encoder_hidden,
+        cfg.actor_hidden,
+        cfg.critic_hidden,
+        cfg.zs_dim,
+        cfg.num_critics,
+    )
+    zs = [(obs_dim, h_e), (h_e, h_e), (h_e, z)]
+    zsa = [(z + action_dim, h_e), (h_e, h_e), (h_e, z)]
+    actor = [(obs_dim, h_a), (h_a + z, h_a), (h_a, h_a), (h_a, action_dim)]
+    critic = [(obs_dim + action_dim, h_c), (h_c + 2 * z, h_c), (h_c, h_c), (h_c, 1)]
+    encoder_step = 2 * _mm(zs) + _mm(zsa) + (_mm(zs) + _mm(zs[1:])) + 2 * _mm(zsa)
+    critic_step = (
+        _mm(zs)
+        + _mm(actor)
+        + _mm(zsa)
+        + k * _mm(critic)
+        + _mm(zs)
+        + _mm(zsa)
+        + k * (2 * _mm(critic) + _mm(critic[1:]))
+    )
+    actor_step = (
+        _mm(zs)
+        + _mm(actor)
+        + _mm(zsa)
+        + k * _mm(critic)
+        + k * _mm(critic)
+        + _mm(zsa)
+        + _mm(actor)
+        + _mm(actor[1:])
+    )
+    return float(cfg.batch_size * (encoder_step + critic_step + actor_step / cfg.policy_delay))
 
 
 def matmul_gflops(n: int = 2048, repeat: int = 5) -> dict[str, float]:
@@ -142,11 +197,17 @@ def random_replay(size: int, obs_dim: int, action_dim: int, seed: int = 0) -> di
 
 # ---------------------------------------------------------------------------------- ilfo
 def bench_ilfo(
-    cfg: TD3Config, obs_dim: int, action_dim: int, data: dict, num_updates: int, repeat: int
+    cfg: TD3Config | TD7Config,
+    obs_dim: int,
+    action_dim: int,
+    data: dict,
+    num_updates: int,
+    repeat: int,
 ) -> list[float]:
     """Seconds per update of each timed call of the compiled ``update`` (compiled ahead of time,
     so compilation is excluded; the best of several calls drops first-call effects)."""
-    agent = make_td3(cfg, obs_dim, action_dim, max_action=1.0)
+    make = make_td7 if isinstance(cfg, TD7Config) else make_td3
+    agent = make(cfg, obs_dim, action_dim, max_action=1.0)
     replay = ReplayData(**{k: jnp.asarray(v) for k, v in data.items()})
     size = len(data["reward"])
     state = agent.init(0)
@@ -158,7 +219,7 @@ def bench_ilfo(
         jax.block_until_ready((state, metrics))
         out.append((time.perf_counter() - start) / num_updates)
     if not np.isfinite(float(metrics["critic_loss"])):
-        raise RuntimeError("ilfo TD3 diverged on the benchmark data")
+        raise RuntimeError(f"ilfo's {type(cfg).__name__} diverged on the benchmark data")
     return out
 
 
@@ -327,26 +388,28 @@ def run(args: argparse.Namespace) -> tuple[list[dict], dict[str, float], list[st
         for dims in args.dims:
             obs_dim, action_dim = DIMS[dims]
             cfg = PRESETS[preset]()
-            flops = flops_per_update(cfg, obs_dim, action_dim)
+            td7 = isinstance(cfg, TD7Config)
+            flops = (flops_per_update_td7 if td7 else flops_per_update)(cfg, obs_dim, action_dim)
+            critic_width = cfg.critic_hidden if td7 else cfg.critic_hidden[-1]
             data = random_replay(args.buffer, obs_dim, action_dim)
             base = {
-                "bench": "td3_update",
+                "bench": "agent_update",
                 "preset": preset,
                 "dims": dims,
                 "obs_dim": obs_dim,
                 "action_dim": action_dim,
                 "batch_size": cfg.batch_size,
-                "critic_hidden": list(cfg.critic_hidden),
+                "critic_hidden": [critic_width] if td7 else list(cfg.critic_hidden),
                 "flops_per_update": flops,
                 "machine_matmul_gflops": round(peak, 2),
                 "layer_matmul_gflops": round(
-                    layer_matmul_gflops(cfg.batch_size, cfg.critic_hidden[-1], args.repeat + 2), 2
+                    layer_matmul_gflops(cfg.batch_size, critic_width, args.repeat + 2), 2
                 ),
             }
             impls: list[tuple[str, Callable[..., list[float]], int, dict]] = [
                 ("ilfo", bench_ilfo, args.updates, {})
             ]
-            if use_torch:
+            if use_torch and not td7:  # the eager twin is TD3's
                 torch_kw = {"threads": args.torch_threads, "adam": args.torch_adam}
                 impls.append(("torch", bench_torch, args.torch_updates, torch_kw))
             for impl, fn, n, kw in impls:
@@ -384,7 +447,7 @@ def main() -> None:
     parser.add_argument("--json", action="store_true", help="one JSON line per case and impl")
     parser.add_argument("--quick", action="store_true", help="smoke run: few updates, 1 repeat")
     parser.add_argument("--presets", nargs="+", choices=list(PRESETS), default=list(PRESETS))
-    parser.add_argument("--dims", nargs="+", choices=list(DIMS), default=list(DIMS))
+    parser.add_argument("--dims", nargs="+", choices=list(DIMS), default=list(DEFAULT_DIMS))
     parser.add_argument("--updates", type=int, default=1000, help="ilfo updates per timed call")
     parser.add_argument(
         "--torch-updates", type=int, default=300, help="torch updates per timed block"
@@ -418,7 +481,7 @@ def main() -> None:
         for r in rows:
             print(json.dumps({**r, **meta}))
         for note in notes:
-            print(json.dumps({"bench": "td3_update", "note": note, **meta}))
+            print(json.dumps({"bench": "agent_update", "note": note, **meta}))
         return
     print(f"# {meta['date']}, {meta['machine']}")
     print(

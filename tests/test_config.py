@@ -30,13 +30,17 @@ def test_help_lists_every_agent_and_rewarder_flag_with_its_doc(capsys):
         ("--trpo-max-kl", "(default: 0.1)"),
         ("--sil-expert-subsample", "(default: 20)"),
         ("--oops-adv-critic-every", "(default: 1)"),
+        ("--td7-critic-hidden", "(default: paper 256, fast 128)"),
+        ("--td7-target-update-every", "(default: 250)"),
     ]:
         assert flag in out and doc in out, flag
     assert (
         "TD3/DDPG agent (oops-td3, oops-ddpg, pwil-td3, oops-adv-td3, gaifo-td3, td3; overrides "
         "the --preset)" in out
     )
-    assert "OOPS rewarder (oops-td3, oops-ddpg, oops-sac)" in out
+    assert "OOPS rewarder (oops-td3, oops-ddpg, oops-sac, oops-td7)" in out
+    assert "TD7 agent (oops-td7, td7; overrides the --preset)" in out
+    assert "SAC agent (oops-sac, firl-fkl, sac):" in out  # one config for both presets
     # Set by the trainer, so not flags.
     assert "--td3-max-time" not in out and "--oops-seed" not in out
     assert "--sil-seed" not in out and "--oops-adv-seed" not in out

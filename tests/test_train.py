@@ -155,13 +155,31 @@ def test_resume_puts_back_the_checkpoints_best_policy(tmp_path):
     assert not (young / "best_policy.msgpack").exists()
 
 
-@pytest.mark.parametrize("algo", ["oops-ddpg", "oops-sac", "pwil-td3", "td3"])
+def test_td7_same_seed_same_numbers_and_resume_equals_uninterrupted(tmp_path):
+    # TD7's state (fixed and target encoders, the clipping range) must survive a checkpoint.
+    td7 = {
+        "algo": "oops-td7",
+        "td7": {
+            "zs_dim": 16,
+            "encoder_hidden": 16,
+            "actor_hidden": 16,
+            "critic_hidden": 16,
+            "target_update_every": 50,
+        },
+    }
+    full = _metrics(_train(tmp_path, "full", **td7))
+    assert full == _metrics(_train(tmp_path, "again", **td7))
+    _train(tmp_path, "resumed", **td7, steps=300)
+    assert _metrics(Trainer.resume(tmp_path / "resumed", progress=False, steps=600).train()) == full
+
+
+@pytest.mark.parametrize("algo", ["oops-ddpg", "oops-sac", "oops-td7", "pwil-td3", "td3", "td7"])
 def test_every_algo_runs(tmp_path, algo):
     rows = _metrics(_train(tmp_path, algo, algo=algo, steps=300))
     assert int(rows[-1]["step"]) >= 300
     evals = [r for r in rows if r["eval_score"]]
     assert evals and rows[-1]["critic_loss"]
-    if algo == "td3":  # the task reward, in standard mode: episodes end at falls
+    if algo in ("td3", "td7"):  # the task reward, in standard mode: episodes end at falls
         assert int(rows[0]["step"]) < 100 and not evals[-1]["eval_ot_distance"]
 
 

@@ -25,6 +25,7 @@ import numpy as np
 
 from ilfo.agents import SACConfig, TD3Config, ddpg_config, make_sac, make_td3
 from ilfo.agents.opolo import OPOLOConfig, make_opolo
+from ilfo.agents.td7 import TD7Config, make_td7
 from ilfo.agents.trpo import TRPOConfig, make_trpo
 from ilfo.rewards import (
     FIRL,
@@ -157,6 +158,13 @@ def _td3_for_run(config: TD3Config, horizon: int, fixed_horizon: bool) -> TD3Con
     )
 
 
+def _td7_for_run(config: TD7Config, horizon: int, fixed_horizon: bool) -> TD7Config:
+    # As TD3's: the time feature exists only in fixed-horizon runs.
+    return dataclasses.replace(
+        config, time_augmentation=config.time_augmentation and fixed_horizon, max_time=horizon
+    )
+
+
 def _sac_learning(config: SACConfig, obs_dim: int, action_dim: int, max_action: float, setup):
     from ilfo.training.learned import with_learned_reward
 
@@ -209,6 +217,20 @@ AGENT_PARTS: dict[str, AgentPart] = {
             "from the DACfO authors' settings instead of the preset's. Set by the "
             "trainer: max_time (the episode horizon); time augmentation applies only where "
             "observations carry the time feature (fixed-horizon runs)."
+        ),
+        set_by_trainer=("max_time",),
+    ),
+    "td7": AgentPart(
+        config=TD7Config,
+        make=make_td7,
+        default=lambda preset: TD7Config() if preset == "paper" else TD7Config.fast(),
+        for_run=_td7_for_run,
+        title="TD7 agent",
+        description=(
+            "Defaults: --preset paper is the TD7 authors' (sfujim/TD7: widths 256, batch 256), "
+            "fast is every width 128 and batch 100 (one CPU core); LAP as its uniform-sampling "
+            "equivalent, the PAL loss. Set by the trainer: max_time (the episode horizon); "
+            "time augmentation applies only in fixed-horizon runs."
         ),
         set_by_trainer=("max_time",),
     ),
@@ -329,6 +351,7 @@ RECIPES: tuple[Recipe, ...] = (
     Recipe("oops-td3", "td3", "oops", "OOPS reward + TD3 with the PAL critic loss (the paper)"),
     Recipe("oops-ddpg", "td3", "oops", "OOPS reward + DDPG", adapt_agent=ddpg_config),
     Recipe("oops-sac", "sac", "oops", "OOPS reward + SAC"),
+    Recipe("oops-td7", "td7", "oops", "OOPS reward + TD7 (SALE encoders, PAL/LAP, Fujimoto 2023)"),
     Recipe(
         "pwil-td3",
         "td3",
@@ -385,6 +408,7 @@ RECIPES: tuple[Recipe, ...] = (
         start_steps=1000,
     ),
     Recipe("td3", "td3", None, "TD3 on the task reward (no demos)"),
+    Recipe("td7", "td7", None, "TD7 on the task reward (no demos)"),
     Recipe("sac", "sac", None, "SAC on the task reward (no demos; ilfo's experts)"),
 )
 

@@ -1,4 +1,4 @@
-"""Learning smoke tests: TD3 (fast preset) and SAC solve Pendulum-v1 (slow; ``-m slow``).
+"""Learning smoke tests: TD3 and TD7 (fast presets) and SAC solve Pendulum-v1 (slow; ``-m slow``).
 
 The loop mirrors the paper's: random steps first, then the policy is frozen during an episode,
 the episode enters the buffer whole, and as many updates run as steps were collected.
@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from ilfo.agents import SACConfig, TD3Config, make_sac, make_td3
+from ilfo.agents.td7 import TD7Config, make_td7
 from ilfo.replay import ReplayBuffer
 
 TOTAL_STEPS = 15_000
@@ -64,11 +65,13 @@ def train_and_evaluate(agent, seed: int = 0) -> tuple[float, float]:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["td3_fast", "sac"])
+@pytest.mark.parametrize("name", ["td3_fast", "td7_fast", "sac"])
 def test_learns_pendulum(name):
+    # Pendulum has no fixed 1000-step horizon, hence no time feature.
     if name == "td3_fast":
-        # Pendulum has no fixed 1000-step horizon, hence no time feature.
         agent = make_td3(TD3Config.fast(time_augmentation=False), 3, 1, 2.0)
+    elif name == "td7_fast":
+        agent = make_td7(TD7Config.fast(time_augmentation=False), 3, 1, 2.0)
     else:
         agent = make_sac(SACConfig(), 3, 1, 2.0)
     mean_return, seconds = train_and_evaluate(agent)

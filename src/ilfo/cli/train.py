@@ -13,11 +13,11 @@ from ilfo.cli._common import _command
 from ilfo.config import add_dataclass_arguments, flag_name, overrides_from_args
 
 if TYPE_CHECKING:
+    from ilfo.algos import AgentPart
     from ilfo.training import TrainConfig
 
 
 def _add_train_parser(sub: argparse._SubParsersAction) -> None:
-    from ilfo.agents import TD3Config
     from ilfo.algos import AGENT_PARTS, PART_CONFIGS, REWARD_PARTS, algos_using
     from ilfo.training import TrainConfig
 
@@ -50,22 +50,29 @@ def _add_train_parser(sub: argparse._SubParsersAction) -> None:
         "the default of another --env or --algo)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    paper, fast = TD3Config.paper(), TD3Config.fast()
-    preset_defaults = {
+    for name, part in {**AGENT_PARTS, **REWARD_PARTS}.items():
+        algos = ", ".join(algos_using(name))
+        presets = _preset_defaults(part) if name in AGENT_PARTS else None
+        overrides = "; overrides the --preset" if presets else ""
+        group = p.add_argument_group(f"{part.title} ({algos}{overrides})", part.description)
+        add_dataclass_arguments(
+            group, PART_CONFIGS[name], part.set_by_trainer, prefix=name, defaults=presets
+        )
+    p.set_defaults(run=_run_train)
+
+
+def _preset_defaults(part: AgentPart) -> dict[str, str] | None:
+    """An agent part's defaults as ``--help`` shows them where its ``--preset``s differ
+    ('paper X, fast Y' for the fields that differ); None where the presets build one config."""
+    paper, fast = part.default("paper"), part.default("fast")
+    if paper == fast:
+        return None
+    return {
         f.name: _show(getattr(paper, f.name))
         if getattr(paper, f.name) == getattr(fast, f.name)
         else f"paper {_show(getattr(paper, f.name))}, fast {_show(getattr(fast, f.name))}"
-        for f in dataclasses.fields(TD3Config)
+        for f in dataclasses.fields(part.config)
     }
-    for name, part in {**AGENT_PARTS, **REWARD_PARTS}.items():
-        algos = ", ".join(algos_using(name))
-        title = f"{part.title} ({algos}{'; overrides the --preset' * (name == 'td3')})"
-        group = p.add_argument_group(title, part.description)
-        defaults = preset_defaults if name == "td3" else None
-        add_dataclass_arguments(
-            group, PART_CONFIGS[name], part.set_by_trainer, prefix=name, defaults=defaults
-        )
-    p.set_defaults(run=_run_train)
 
 
 def _show(value: object) -> str:

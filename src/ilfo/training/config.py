@@ -13,6 +13,7 @@ from typing import Any, Literal
 
 from ilfo.agents import SACConfig, TD3Config
 from ilfo.agents.opolo import OPOLOConfig
+from ilfo.agents.td7 import TD7Config
 from ilfo.agents.trpo import TRPOConfig
 from ilfo.algos import AGENT_PARTS, ALGOS, PART_CONFIGS, Recipe, algos_using, recipe
 from ilfo.config import dataclass_from_dict
@@ -55,8 +56,9 @@ class TrainConfig:
     agents only: other than 1 is an error for TRPO (sil), which learns once per batch
     (``--trpo-batch-steps``)."""
     preset: Literal["paper", "fast"] = "paper"
-    """TD3/DDPG hyperparameters: paper (critics 1024-1024) or fast (critics 256-256); ``td3``
-    (the --td3-* flags) changes single ones."""
+    """Agent sizes: for TD3/DDPG paper (critics 1024-1024) or fast (critics 256-256); for TD7
+    paper (the authors': widths 256, batch 256) or fast (widths 128, batch 100); the part's
+    flags (--td3-*, --td7-*) change single settings."""
     seed: int = 0
     """Seed of everything: environment, exploration, networks, demo draws."""
     fixed_horizon: bool | None = None
@@ -100,6 +102,9 @@ class TrainConfig:
     (``TD3Config.paper()`` or ``.fast()``). Whatever is given, the trainer sets ``max_time`` to
     the episode horizon, keeps ``time_augmentation`` only where observations carry the time
     feature (fixed-horizon runs), and applies ``ddpg_config`` for oops-ddpg."""
+    td7: TD7Config | None = None
+    """TD7 agent (algos oops-td7, td7); None: the preset's (``TD7Config()``, the authors', or
+    ``TD7Config.fast()``). The trainer sets ``max_time`` and time augmentation as for TD3."""
     sac: SACConfig | None = None
     """SAC agent (algos oops-sac, firl-fkl, sac); None: ``SACConfig()``, Haarnoja et al.'s
     defaults (firl-fkl: the f-IRL authors' SAC)."""
@@ -246,7 +251,9 @@ class TrainConfig:
             given = dataclasses.replace(given, seed=self.seed)
         return given
 
-    def agent_config(self, horizon: int) -> TD3Config | SACConfig | OPOLOConfig | TRPOConfig:
+    def agent_config(
+        self, horizon: int
+    ) -> TD3Config | TD7Config | SACConfig | OPOLOConfig | TRPOConfig:
         """The agent's config exactly as the run builds it, for episodes of ``horizon`` steps:
         what the trainer sets (``AgentPart.for_run``: TD3's ``max_time`` is the horizon, time
         augmentation only where observations carry the time feature), then the recipe's change
