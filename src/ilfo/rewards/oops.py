@@ -63,6 +63,14 @@ class OOPSConfig:
     """Start each Sinkhorn solve from the potentials of the last solve against the same demo
     (same result to tol, fewer iterations when episodes change slowly; off by default so that a
     reward depends on its episode alone)."""
+    time_index: bool = False
+    """Append 2 * time-to-go / T to each (standardised) state before atoms are made, T the
+    episode's (or demo's) number of transitions, so that OT matches steps at similar times
+    (the OOPS authors' ``use_time_index``; off in the paper's runs)."""
+    time_weighted_cost: bool = False
+    """Multiply the cost of atom i of n (learner) and j of m (expert) by 1 + |i/n - j/m|,
+    penalising matches far apart in time (the authors' ``use_tcot``; off in the paper's
+    runs). With ``demo_selection='pooled'`` j/m is the position within the atom's own demo."""
     seed: int = 0
     """Seed of the generator that draws the demo with ``demo_selection='random'``."""
 
@@ -78,6 +86,11 @@ class OOPSConfig:
                 f"demo_selection must be random, pooled or nearest, got {self.demo_selection!r}"
             )
         check_settings(self, counts=("max_iter",), positive=("reg", "tol", "reward_scale"))
+
+
+def _positions(count: int) -> np.ndarray:
+    """Atom i's position i / count in its episode, for ``time_weighted_cost``."""
+    return np.arange(count, dtype=np.float64) / count
 
 
 class OOPS:
@@ -99,17 +112,19 @@ class OOPS:
         else:
             dim = self.obs_dim
             self.standardizer = Standardizer(mean=np.zeros(dim), scale=np.ones(dim))
-        self.expert_atoms = [make_atoms(self.standardizer(d), self.config.atoms) for d in demos]
+        self.expert_atoms = [self._atoms(d) for d in demos]
+        self.expert_positions = [_positions(len(a)) for a in self.expert_atoms]
         self.rng = np.random.default_rng(self.config.seed)
         self._potentials: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def __call__(self, observations: np.ndarray) -> RewardOutput:
         """Rewards (T,) of one learner episode's observations (T + 1, obs_dim)."""
         observations = check_episode(observations, self.obs_dim)
-        learner = make_atoms(self.standardizer(observations), self.config.atoms)
+        learner = self._atoms(observations)
         selection = self.config.demo_selection
         if selection == "pooled":
-            index, coupling = None, self._solve(learner, np.concatenate(self.expert_atoms), -1)
+            pooled = np.concatenate(self.expert_atoms)
+            index, coupling = None, self._solve(learner, pooled, -1)
         elif selection == "random":
             index = int(self.rng.integers(len(self.expert_atoms)))
             coupling = self._solve(learner, self.expert_atoms[index], index)
@@ -131,7 +146,7 @@ class OOPS:
         labelling aggregates over demos (``ilfo.labelling``). ``row_costs`` are the raw
         transported costs, before OOPS's reward scale."""
         observations = check_episode(observations, self.obs_dim)
-        learner = make_atoms(self.standardizer(observations), self.config.atoms)
+        learner = self._atoms(observations)
         return [self._solve(learner, e, i) for i, e in enumerate(self.expert_atoms)]
 
     def state(self) -> RewardState:
@@ -153,9 +168,25 @@ class OOPS:
             k: (np.asarray(arrays[f"f_{k}"]), np.asarray(arrays[f"g_{k}"])) for k in keys
         }
 
+    def _atoms(self, observations: np.ndarray) -> np.ndarray:
+        """An episode's atoms: its standardised states, with the time index where configured."""
+        states = self.standardizer(observations)
+        if self.config.time_index:
+            steps = len(states) - 1
+            time_to_go = 2.0 * np.arange(steps, -1, -1, dtype=np.float64) / max(steps, 1)
+            states = np.concatenate([states, time_to_go[:, None].astype(states.dtype)], axis=1)
+        return make_atoms(states, self.config.atoms)
+
     def _solve(self, learner: np.ndarray, expert: np.ndarray, key: int) -> OTResult:
         cfg = self.config
         cost = cost_matrix(learner, expert, cfg.metric)
+        if cfg.time_weighted_cost:
+            # key -1: the pooled demos, each atom at its position within its own demo.
+            expert_positions = (
+                np.concatenate(self.expert_positions) if key == -1 else self.expert_positions[key]
+            )
+            gap = np.abs(_positions(len(learner))[:, None] - expert_positions[None, :])
+            cost = cost * (1.0 + gap).astype(cost.dtype)
         init = self._potentials.get(key) if cfg.warm_start else None
         if init is not None and (init[0].shape[0], init[1].shape[0]) != cost.shape:
             # A learner episode of another length, or a state saved against other demos.
