@@ -58,3 +58,20 @@ def test_torch_init_is_pytorch_linear_default():
                 np.testing.assert_allclose(w.std(), bound / np.sqrt(3), rtol=0.1)
     flax_default = CriticEnsemble((400, 300), num_critics=2).init(jax.random.PRNGKey(0), obs, act)
     assert not np.any(flax_default["params"]["ensemble"]["MLP_0"]["Dense_0"]["bias"])
+
+
+def test_critic_layer_norm_normalises_each_hidden_layer_and_is_off_by_default():
+    from ilfo.agents.networks import MLP
+
+    x = jax.random.normal(jax.random.PRNGKey(0), (5, 3)) * 100.0
+    plain, normed = MLP((8, 8), 1), MLP((8, 8), 1, layer_norm=True)
+    assert "LayerNorm_0" not in plain.init(jax.random.PRNGKey(1), x)["params"]
+    params = normed.init(jax.random.PRNGKey(1), x)
+    assert {"LayerNorm_0", "LayerNorm_1"} <= set(params["params"])
+    # Each hidden layer's pre-activation has zero mean and unit variance per sample, so inputs
+    # 100x larger give (almost) the same output: without the norm they would not.
+    np.testing.assert_allclose(
+        normed.apply(params, x), normed.apply(params, x * 100.0), rtol=1e-3, atol=1e-3
+    )
+    plain_params = plain.init(jax.random.PRNGKey(1), x)
+    assert not np.allclose(plain.apply(plain_params, x), plain.apply(plain_params, x * 100.0))

@@ -65,11 +65,14 @@ def train_and_evaluate(agent, seed: int = 0) -> tuple[float, float]:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["td3_fast", "td7_fast", "sac"])
+@pytest.mark.parametrize("name", ["td3_fast", "td3_fast_layer_norm", "td7_fast", "sac"])
 def test_learns_pendulum(name):
     # Pendulum has no fixed 1000-step horizon, hence no time feature.
     if name == "td3_fast":
         agent = make_td3(TD3Config.fast(time_augmentation=False), 3, 1, 2.0)
+    elif name == "td3_fast_layer_norm":
+        config = TD3Config.fast(time_augmentation=False, critic_layer_norm=True)
+        agent = make_td3(config, 3, 1, 2.0)
     elif name == "td7_fast":
         agent = make_td7(TD7Config.fast(time_augmentation=False), 3, 1, 2.0)
     else:

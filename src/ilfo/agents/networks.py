@@ -67,19 +67,23 @@ def dense(features: int, fan_in: int, init_scheme: InitName) -> nn.Dense:
 class MLP(nn.Module):
     """Multilayer perceptron (ReLU or tanh hidden layers) with a linear output layer.
 
-    x (..., in_dim) -> (..., out_dim).
+    x (..., in_dim) -> (..., out_dim). ``layer_norm``: a LayerNorm after each hidden layer's
+    matmul, before its activation (the critics of Ball et al. 2023 and SimBa's normalised
+    hidden layers), which keeps a critic's features bounded as its targets grow.
     """
 
     hidden: Sequence[int]
     out_dim: int
     init_scheme: InitName = "flax"
     activation: Activation = "relu"
+    layer_norm: bool = False
 
     @nn.compact
     def __call__(self, x: jax.Array) -> jax.Array:
         act = _ACTIVATIONS[self.activation]
         for width in self.hidden:
-            x = act(dense(width, x.shape[-1], self.init_scheme)(x))
+            x = dense(width, x.shape[-1], self.init_scheme)(x)
+            x = act(nn.LayerNorm()(x) if self.layer_norm else x)
         return dense(self.out_dim, x.shape[-1], self.init_scheme)(x)
 
 
@@ -101,11 +105,12 @@ class Critic(nn.Module):
 
     hidden: Sequence[int]
     init_scheme: InitName = "flax"
+    layer_norm: bool = False
 
     @nn.compact
     def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
         x = jnp.concatenate([obs, action], axis=-1)
-        return MLP(self.hidden, 1, self.init_scheme)(x)[..., 0]
+        return MLP(self.hidden, 1, self.init_scheme, layer_norm=self.layer_norm)(x)[..., 0]
 
 
 class CriticEnsemble(nn.Module):
@@ -122,6 +127,8 @@ class CriticEnsemble(nn.Module):
     hidden: Sequence[int]
     num_critics: int = 2
     init_scheme: InitName = "flax"
+    layer_norm: bool = False
+    """A LayerNorm in each hidden layer of every critic (``MLP``)."""
 
     @nn.compact
     def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
@@ -133,7 +140,8 @@ class CriticEnsemble(nn.Module):
             out_axes=0,
             axis_size=self.num_critics,
         )
-        return ensemble(self.hidden, self.init_scheme, name="ensemble")(obs, action)
+        critic = ensemble(self.hidden, self.init_scheme, self.layer_norm, name="ensemble")
+        return critic(obs, action)
 
 
 class SquashedGaussianActor(nn.Module):

@@ -84,6 +84,9 @@ class SACConfig:
     """Lower clip of the actor's log std."""
     log_std_max: float = 2.0
     """Upper clip of the actor's log std."""
+    critic_layer_norm: bool = False
+    """A LayerNorm in each hidden layer of the critics, before the activation (Ball et al.
+    2023; SimBa's normalised critics); off in Haarnoja et al.'s SAC."""
 
     def __post_init__(self) -> None:
         if (
@@ -296,7 +299,7 @@ def make_sac(
     max_action = as_float_bound(max_action)
     nets = _Networks(
         actor=SquashedGaussianActor(cfg.actor_hidden, action_dim, cfg.log_std_min, cfg.log_std_max),
-        critic=CriticEnsemble(cfg.critic_hidden, cfg.num_critics),
+        critic=CriticEnsemble(cfg.critic_hidden, cfg.num_critics, layer_norm=cfg.critic_layer_norm),
         actor_opt=optax.adam(cfg.lr_actor),
         critic_opt=make_optimizer(cfg.lr_critic, cfg.critic_grad_clip),
         temperature_opt=optax.adam(cfg.lr_temperature),

@@ -118,6 +118,9 @@ class TD3Config:
     max_time: int = 1000
     """Scale of the time feature and the largest time-to-go drawn by augmentation (the horizon);
     set by the trainer to the episode horizon in ``ilfo train``."""
+    critic_layer_norm: bool = False
+    """A LayerNorm in each hidden layer of the critics, before the activation (Ball et al.
+    2023; SimBa's normalised critics); off in the paper's TD3."""
 
     def __post_init__(self) -> None:
         if self.init_scheme not in ("flax", "torch", "glorot"):
@@ -548,8 +551,10 @@ def make_td3(
         raise ValueError("time augmentation needs observations with a trailing time feature")
     nets = _Networks(
         actor=DeterministicActor(cfg.actor_hidden, action_dim, max_action, cfg.init_scheme),
-        critic=CriticEnsemble(cfg.critic_hidden, cfg.num_critics, cfg.init_scheme),
-        first_critic=CriticEnsemble(cfg.critic_hidden, 1, cfg.init_scheme),
+        critic=CriticEnsemble(
+            cfg.critic_hidden, cfg.num_critics, cfg.init_scheme, cfg.critic_layer_norm
+        ),
+        first_critic=CriticEnsemble(cfg.critic_hidden, 1, cfg.init_scheme, cfg.critic_layer_norm),
         actor_opt=optax.adam(cfg.lr_actor),
         critic_opt=make_optimizer(cfg.lr_critic, cfg.critic_grad_clip),
         max_action=max_action,
