@@ -4,6 +4,7 @@ and a clear error (naming the file) for every damaged file a run reads."""
 import errno
 import json
 import os
+import shutil
 import struct
 import subprocess
 import sys
@@ -23,6 +24,7 @@ from ilfo.training.run_dir import (
     RunLock,
     create_run_dir,
     latest_checkpoint,
+    results_past_first_checkpoint,
     snapshot_run,
 )
 from test_train import DEMOS, TINY, _metrics, _train
@@ -132,17 +134,105 @@ def test_a_newest_checkpoint_missing_files_is_refused_with_the_repair_not_skippe
         Trainer.resume(run, progress=False, steps=500)
 
 
+class _Killed(Exception):
+    """Stands for a kill: the trainer stops where it is raised, writing nothing more."""
+
+
+def _killed() -> None:
+    raise _Killed
+
+
 def test_a_run_killed_before_its_first_checkpoint_starts_again_from_zero(tmp_path):
+    """Killed while writing its first checkpoint: its rows up to the one that checkpoint fell
+    due at (step 200) and its best policy of that evaluation are what a start from step 0
+    writes again, so it starts again, without them."""
     full = _metrics(_train(tmp_path, "full", steps=300))
     run = tmp_path / "run"
     trainer = Trainer(TrainConfig(**{**TINY, "steps": 300}), run, progress=False)
-    trainer.save_checkpoint = lambda: None  # every checkpoint "lost"
-    trainer.train()
-    assert latest_checkpoint(run) is None and _metrics(run)
+    trainer.save_checkpoint = _killed
+    with pytest.raises(_Killed):
+        trainer.train()
+    assert latest_checkpoint(run) is None and [r["step"] for r in _metrics(run)] == ["100", "200"]
+    assert (run / "best_policy.msgpack").is_file() and not (run / "policy.msgpack").exists()
     with pytest.warns(UserWarning, match="starts again from step 0"):
         resumed = Trainer.resume(run, progress=False)
     assert resumed.step == 0 and _metrics(run) == []
+    assert not (run / "best_policy.msgpack").exists() and not (run / "best_policy.json").exists()
     assert _metrics(resumed.train()) == full
+
+
+def test_a_run_with_results_and_no_checkpoint_is_refused_and_keeps_them(tmp_path, capsys):
+    """A finished run whose checkpoints were removed (to free the disk) has nothing to resume
+    from: a start from step 0 would delete its metrics and policies, so resume refuses it,
+    saying what it holds and how to train it again, and changes no file."""
+    run = _train(tmp_path, "run", steps=600)
+    shutil.rmtree(run / "checkpoints")
+    kept = ("metrics.csv", "config.json", "policy.msgpack", "best_policy.msgpack")
+    before = {name: (run / name).read_bytes() for name in kept}
+    with pytest.raises(ValueError, match="no complete checkpoint") as refused:
+        Trainer.resume(run, progress=False)
+    message = str(refused.value)
+    assert str(run) in message and "6 metrics rows to step 600" in message
+    assert "policy.msgpack" in message and "best_policy.msgpack" in message
+    assert f"ilfo train --config {run / 'config.json'}" in message
+    for argv in (
+        ["train", "--resume", str(run)],
+        ["train", "--resume", str(run), "--steps", "900"],
+    ):
+        err = _cli_error(capsys, argv)
+        assert str(run) in err and "nothing can be resumed" in err
+    # Killed after checkpoints since removed, before its final policy: its rows past the first
+    # checkpoint's are kept too.
+    (run / "policy.msgpack").unlink()
+    with pytest.raises(ValueError, match="6 metrics rows to step 600"):
+        Trainer.resume(run, progress=False)
+    assert {name: (run / name).read_bytes() for name in kept if name != "policy.msgpack"} == {
+        name: data for name, data in before.items() if name != "policy.msgpack"
+    }
+    RunLock(run).acquire().release()  # the refusal let the run go
+    # What the message says to do starts a new run from its config.
+    argv = ["train", "--no-progress", "--config", str(run / "config.json")]
+    assert main([*argv, "--out", str(tmp_path / "again"), "--steps", "200"]) == 0
+    (again,) = (tmp_path / "again").iterdir()
+    assert json.loads((again / "config.json").read_text())["eval_every"] == TINY["eval_every"]
+
+
+def _write_rows(run, rows):
+    lines = ["step,episode,wall_time", *(f"{s},{k + 1},{w}" for k, (s, w) in enumerate(rows))]
+    (run / "metrics.csv").write_text("\n".join(lines) + "\n")
+
+
+def test_results_past_the_first_checkpoint_are_read_off_the_rows_policies_and_clock(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    by_steps = TrainConfig(**{**TINY, "steps": 600})  # the first checkpoint falls due at 200
+    assert results_past_first_checkpoint(run, by_steps) is None  # nothing logged yet
+    _write_rows(run, [(100, 0.1), (200, 0.2)])  # killed while checkpointing at 200
+    assert results_past_first_checkpoint(run, by_steps) is None
+    (run / "metrics.csv").write_text(
+        (run / "metrics.csv").read_text() + "300,3\n"  # a row the kill cut short
+    )
+    assert results_past_first_checkpoint(run, by_steps) is None
+    _write_rows(run, [(100, 0.1), (200, 0.2), (300, 0.3)])
+    assert results_past_first_checkpoint(run, by_steps) == "3 metrics rows to step 300"
+    # By the clock (checkpoint_minutes: 1 s here), as the loop checkpoints by it.
+    by_clock = TrainConfig(**{**TINY, "steps": 600, "checkpoint_every": 10**6,
+                              "checkpoint_minutes": 1 / 60})  # fmt: skip
+    assert results_past_first_checkpoint(run, by_clock) is None  # 0.3 s: none due yet
+    _write_rows(run, [(100, 0.5), (200, 2.5)])
+    assert results_past_first_checkpoint(run, by_clock) is None  # due after its last row
+    _write_rows(run, [(100, 0.5), (200, 2.5), (300, 3.0)])
+    assert results_past_first_checkpoint(run, by_clock) == "3 metrics rows to step 300"
+    # A final policy (written after the last checkpoint), or a best policy past the first
+    # checkpoint without the rows.
+    (run / "metrics.csv").unlink()
+    (run / "policy.msgpack").write_bytes(b"x")
+    assert results_past_first_checkpoint(run, by_steps) == "policy.msgpack"
+    (run / "policy.msgpack").unlink()
+    (run / "best_policy.json").write_text(json.dumps({"step": 200}))
+    assert results_past_first_checkpoint(run, by_steps) is None  # evaluated as it fell due
+    (run / "best_policy.json").write_text(json.dumps({"step": 400}))
+    assert results_past_first_checkpoint(run, by_steps) == "best_policy.json"
 
 
 def test_checkpoints_follow_the_clock_as_well_as_the_steps(tmp_path, monkeypatch):

@@ -147,12 +147,13 @@ def test_resume_puts_back_the_checkpoints_best_policy(tmp_path):
     with pytest.warns(UserWarning, match="from step 500, after checkpoint"):
         Trainer.resume(run, progress=False)._lock.release()
     assert json.loads((run / "best_policy.json").read_text())["step"] == 500
-    # A run killed before its first checkpoint starts again from 0, without its old best.
+    # A finished run whose checkpoints were removed is not started again from 0: its best
+    # policy stays (test_rundir: one killed before its first checkpoint starts again).
     shutil.rmtree(young / "checkpoints")
-    with pytest.warns(UserWarning, match="starts again from step 0"):
-        Trainer.resume(young, progress=False)._lock.release()
-    assert not (young / "best_policy.json").exists()
-    assert not (young / "best_policy.msgpack").exists()
+    best = {n: (young / n).read_bytes() for n in kept}
+    with pytest.raises(ValueError, match="no complete checkpoint"):
+        Trainer.resume(young, progress=False)
+    assert {n: (young / n).read_bytes() for n in kept} == best
 
 
 def test_td7_same_seed_same_numbers_and_resume_equals_uninterrupted(tmp_path):
@@ -522,6 +523,32 @@ def test_a_replay_buffer_smaller_than_an_episode_is_refused_at_the_start(tmp_pat
 def test_counts_that_are_not_integers_are_an_error(field, value):
     with pytest.raises(ValueError, match=f"{field} must be an integer"):
         TrainConfig(**{**TINY, field: value})
+
+
+def test_evaluation_episodes_past_the_maximum_are_refused_up_front(tmp_path, capsys):
+    """A billion evaluation episodes (a typo) built a billion seeds at the first evaluation,
+    and the kernel killed the run at 23 GB with no message: the config refuses them before a
+    run directory is made, and `ilfo eval --episodes` by the same check before it loads."""
+    from ilfo.training.config import MAX_EVAL_EPISODES
+
+    most = TrainConfig(**{**TINY, "eval_episodes": MAX_EVAL_EPISODES})
+    assert most.eval_episodes == MAX_EVAL_EPISODES
+    too_many = MAX_EVAL_EPISODES + 1
+    message = rf"eval_episodes \(--eval-episodes\) must be from 1 to {MAX_EVAL_EPISODES:,}"
+    with pytest.raises(ValueError, match=rf"{message} .*got {too_many:,}"):
+        TrainConfig(**{**TINY, "eval_episodes": too_many})
+    out = tmp_path / "runs"
+    argv = ["train", "--eval-episodes", "1000000000", "--demos", DEMOS, "--no-progress"]
+    assert main([*argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert "--eval-episodes" in err and "got 1,000,000,000" in err
+    assert not out.exists() or not list(out.iterdir())
+    run = tmp_path / "a-run"  # checked before the run is read: its state does not matter
+    for episodes in ("1000000000", "0"):
+        assert main(["eval", str(run), "--episodes", episodes]) == 2
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and "--episodes must be from 1 to" in err
 
 
 def test_numpy_integers_are_taken_as_ints():

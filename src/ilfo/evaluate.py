@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from ilfo.training import load_demo_set, load_run_policy, score_policy
+from ilfo.training.config import check_eval_episodes
 from ilfo.training.rollout import evaluation_seeds
 
 
@@ -15,13 +16,13 @@ def evaluate_run(
     run_dir: Path, episodes: int = 10, video: str | None = None, best: bool = False
 ) -> dict[str, Any]:
     """Run deterministic fixed-horizon episodes of a run's policy and summarise them, on the
-    run's evaluation seeds (``rollout.evaluation_seeds``: not the demos').
+    run's evaluation seeds (``rollout.evaluation_seeds``: not the demos'); ``episodes`` from 1
+    to ``config.MAX_EVAL_EPISODES``.
 
     The policy: ``policy.msgpack`` if the run finished, else its newest checkpoint's; with
     ``best``, ``best_policy.msgpack`` (``training.load_run_policy``).
     """
-    if episodes < 1:
-        raise ValueError(f"--episodes must be >= 1, got {episodes}")
+    check_eval_episodes(episodes, "--episodes")
     run = load_run_policy(run_dir, "best" if best else "final")
     config, horizon = run.config, run.env.horizon
     demos = load_demo_set(config, run.env.obs_dim)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -219,6 +220,37 @@ def test_run_states_read_off_the_disk(tmp_path):
     assert run_status(sweep, sweep.run(b)).steps_per_s is None
     record_attempt(sweep, c, "reset")
     assert run_status(sweep, sweep.run(c)).state == "pending"
+
+
+def test_a_run_with_results_and_no_checkpoint_is_unresumable_not_trained_again(tmp_path, capsys):
+    """A finished run whose checkpoints were removed (to free the disk) would start again from
+    step 0, deleting its metrics and policy: it is reported as unresumable, says why, and is
+    not started; one killed while writing its first checkpoint is pending, as before."""
+    from ilfo.cli import main
+
+    sweep = create_sweep(tmp_path, SweepSpec(seed=(0, 1), config=TINY))
+    finished, killed = (r.name for r in sweep.runs)
+    _finish(sweep, finished)
+    rows = "step,episode\n100,1\n200,2\n300,3\n400,4\n"
+    (sweep.run_dir(finished) / "metrics.csv").write_text(rows)
+    shutil.rmtree(sweep.run_dir(finished) / "checkpoints")
+    sweep.run_dir(killed).mkdir(parents=True)  # its first checkpoint falls due at step 200
+    (sweep.run_dir(killed) / "metrics.csv").write_text("step,episode\n100,1\n200,2\n")
+    states = {s.name: s for s in sweep.statuses()}
+    assert states[killed].state == "pending"
+    gone = states[finished]
+    assert gone.state == "unresumable" and gone.step == 400 and gone.failures == 0
+    assert str(sweep.run_dir(finished)) in gone.error
+    assert "4 metrics rows to step 400" in gone.error and FINAL_POLICY_FILE in gone.error
+    backend = _FakeBackend({killed: ["done"]})
+    final = {s.name: s for s in run_sweep(sweep, backend, poll_seconds=0)}
+    assert backend.started == [killed] and final[finished].state == "unresumable"
+    assert (sweep.run_dir(finished) / "metrics.csv").read_text() == rows
+    assert main(["sweep", "status", str(sweep.root)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split()[:2] == [finished, "unresumable"] and "move the directory" in lines[0]
+    assert lines[1].split()[:2] == [killed, "done"]
+    assert "1 done, 0 running, 0 failed, 0 pending, 1 unresumable" in lines[2]
 
 
 def test_snapshot_keeps_checkpoints_without_buffers_and_continues_as_a_sweep(tmp_path):

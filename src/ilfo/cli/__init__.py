@@ -1,7 +1,7 @@
 """The ``ilfo`` command line: thin wrappers over the library, one module per command group
-(``train``: train, eval, plot, snapshot; ``experts``: expert train / export / eval; ``data``:
-reward, demos info / convert / collect, label; ``experiments``: sweep run / create / status /
-snapshot, report, reproduce)."""
+(``train``: train, eval, plot, snapshot; ``diagnose``; ``experts``: expert train / export /
+eval; ``data``: reward, demos info / convert / collect, label; ``experiments``: sweep run /
+create / status / snapshot, report, reproduce)."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from typing import TextIO
 from ilfo.cli._common import Parser
 from ilfo.cli._common import _command as _command  # re-exported: ilfo.cli._command
 from ilfo.cli.data import _add_demos_parser, _add_label_parser, _add_reward_parser
+from ilfo.cli.diagnose import _add_diagnose_parser
 from ilfo.cli.experiments import _add_report_parser, _add_reproduce_parser, _add_sweep_parser
 from ilfo.cli.experts import _add_expert_parser
 from ilfo.cli.train import (
@@ -40,6 +41,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     _add_eval_parser(sub)
     _add_plot_parser(sub)
     _add_snapshot_parser(sub)
+    _add_diagnose_parser(sub)
     _add_expert_parser(sub)
     _add_reward_parser(sub)
     _add_demos_parser(sub)

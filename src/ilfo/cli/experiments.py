@@ -251,6 +251,9 @@ def _run_sweep(args: argparse.Namespace) -> int:
         mine = final[start : start + len(sweep.runs)]
         start += len(sweep.runs)
         _print_failed(sweep, [s for s in mine if s.state == "failed"])
+        for status in mine:
+            if status.state == "unresumable":
+                print(f"unresumable: {status.name}: {status.error}")
     return 1 if any(s.state == "failed" for s in final) else 0
 
 
@@ -390,9 +393,10 @@ class _Progress:
         counts = summary(statuses)
         self._bar.total = counts["steps_total"]
         self._bar.n = counts["steps_done"]
+        unresumable = f" unresumable {counts['unresumable']}" if counts["unresumable"] else ""
         self._bar.set_postfix_str(
             f"done {counts['done']} running {counts['running']} failed {counts['failed']} "
-            f"pending {counts['pending']}",
+            f"pending {counts['pending']}{unresumable}",
             refresh=True,
         )
         if message:
@@ -423,6 +427,7 @@ def _run_sweep_status(args: argparse.Namespace) -> int:
             )
         return 0
     width = max(len(name) for name, _, _ in rows)
+    state_width = max(len("pending"), *(len(s.state) for _, s, _ in rows))
     for name, s, _ in rows:
         error = f"  {s.error}" if s.error and s.state != "done" else ""
         failures = f"  failures {s.failures}" if s.failures else ""
@@ -431,7 +436,10 @@ def _run_sweep_status(args: argparse.Namespace) -> int:
             if s.hours_left is not None
             else ""
         )
-        print(f"{name:<{width}}  {s.state:<7}  {s.step:>9,}/{s.steps:,}{speed}{failures}{error}")
+        print(
+            f"{name:<{width}}  {s.state:<{state_width}}  {s.step:>9,}/{s.steps:,}{speed}"
+            f"{failures}{error}"
+        )
     statuses = [s for _, s, _ in rows]
     counts = summary(statuses)
     share = counts["steps_done"] / max(1, counts["steps_total"])

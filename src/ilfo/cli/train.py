@@ -159,6 +159,8 @@ def _run_train(args: argparse.Namespace) -> int:
 
 
 def _add_eval_parser(sub: argparse._SubParsersAction) -> None:
+    from ilfo.training.config import MAX_EVAL_EPISODES  # imported by `ilfo train`'s parser too
+
     p = sub.add_parser(
         "eval",
         help="Evaluate a run's final policy (deterministic episodes).",
@@ -169,7 +171,12 @@ def _add_eval_parser(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("run_dir", help="a run directory written by `ilfo train`")
-    p.add_argument("--episodes", type=int, default=10, help="episodes to run (default 10)")
+    p.add_argument(
+        "--episodes",
+        type=int,
+        default=10,
+        help=f"episodes to run (default 10, at most {MAX_EVAL_EPISODES:,})",
+    )
     p.add_argument(
         "--best", action="store_true", help="evaluate best_policy.msgpack instead of the final one"
     )

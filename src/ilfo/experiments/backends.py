@@ -453,8 +453,9 @@ def progress_line(statuses: list[RunStatus]) -> str:
     """One line: counts by state and the steps done of all."""
     counts = summary(statuses)
     share = counts["steps_done"] / max(1, counts["steps_total"])
+    unresumable = f", {counts['unresumable']} unresumable" if counts["unresumable"] else ""
     return (
         f"{counts['done']} done, {counts['running']} running, {counts['failed']} failed, "
-        f"{counts['pending']} pending; {counts['steps_done']:,}/{counts['steps_total']:,} "
-        f"steps ({share:.1%})"
+        f"{counts['pending']} pending{unresumable}; "
+        f"{counts['steps_done']:,}/{counts['steps_total']:,} steps ({share:.1%})"
     )

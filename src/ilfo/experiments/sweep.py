@@ -10,10 +10,14 @@ directory holds::
     logs/NAME.log         the worker's output
 
 Nothing else records progress: a run is *done* when its final policy is written and its newest
-checkpoint reached the run's steps, *running* while a process holds its run lock, *failed* when
-it ended with an error more often than the sweep allows, else *pending* (with the steps its
-metrics reached). So a sweep can be killed at any moment and started again: finished runs are
-skipped, interrupted ones resume from their checkpoints, and each run is trained exactly once.
+checkpoint reached the run's steps, *running* while a process holds its run lock,
+*unresumable* when it has no complete checkpoint but holds what only a run past its first one
+writes (its final policy, metrics rows after that checkpoint's: its checkpoints were removed;
+``run_dir.results_past_first_checkpoint``), which is never trained again (that would delete
+them), *failed* when it ended with an error more often than the sweep allows, else *pending*
+(with the steps its metrics reached). So a sweep can be killed at any moment and started
+again: finished runs are skipped, interrupted ones resume from their checkpoints, and each run
+is trained exactly once.
 """
 
 from __future__ import annotations
@@ -40,7 +44,8 @@ SWEEP_PARTS = (RUNS_DIR, ATTEMPTS_DIR, LOGS_DIR)
 AXES = ("env", "algo", "num_demos", "seed")
 """The axes of a sweep, besides its named variants."""
 
-RunState = Literal["done", "running", "failed", "pending"]
+RunState = Literal["done", "running", "unresumable", "failed", "pending"]
+RUN_STATES: tuple[RunState, ...] = ("done", "running", "unresumable", "failed", "pending")
 
 
 @dataclass(frozen=True)
@@ -447,7 +452,7 @@ class RunStatus:
     failures: int
     """How many of its attempts ended with an error (not counting interruptions)."""
     error: str | None = None
-    """The last failure's message."""
+    """The last failure's message; for an unresumable run, what it holds and how to go on."""
     steps_per_s: float | None = None
     """A running run's recent speed (its last episodes, evaluations included); None else."""
 
@@ -476,12 +481,34 @@ def run_status(sweep: Sweep, run: SweepRun) -> RunStatus:
         state: RunState = "done"
     elif _locked(run_dir):
         state = "running"
+    elif (results := _results_past_first_checkpoint(sweep, run, checkpoints)) is not None:
+        state = "unresumable"
+        error = (
+            f"{run_dir} has no complete checkpoint but holds the results of a run past its "
+            f"first one ({results}): not trained again, which would delete them; to train it "
+            "afresh, move the directory away"
+        )
     elif len(failed) > sweep.spec.retries:
         state = "failed"
     else:
         state = "pending"
     rate = _metrics_rate(run_dir) if state == "running" else None
     return RunStatus(run.name, state, min(step, run.steps), run.steps, len(failed), error, rate)
+
+
+def _results_past_first_checkpoint(
+    sweep: Sweep, run: SweepRun, checkpoints: Sequence[tuple[int, Path]]
+) -> str | None:
+    """``run_dir.results_past_first_checkpoint`` of a run with no checkpoint at all, by its
+    config in the manifest; None where it has one (``checkpoints``, its complete ones), or a
+    damaged one, which its worker's resume refuses with the repair to make."""
+    from ilfo.training import config_from_dict
+    from ilfo.training.run_dir import damaged_checkpoints, results_past_first_checkpoint
+
+    if checkpoints or damaged_checkpoints(sweep.run_dir(run.name)):
+        return None
+    config = config_from_dict(run.config, f"{sweep.root / MANIFEST_FILE} (run {run.name})")
+    return results_past_first_checkpoint(sweep.run_dir(run.name), config)
 
 
 def _locked(run_dir: Path) -> bool:
@@ -576,7 +603,7 @@ def record_attempt(sweep: Sweep, name: str, event: str, **fields: Any) -> None:
 
 def summary(statuses: Sequence[RunStatus]) -> dict[str, int]:
     """Counts of runs by state, and steps done and in all."""
-    counts = {state: 0 for state in ("done", "running", "failed", "pending")}
+    counts = {state: 0 for state in RUN_STATES}
     for status in statuses:
         counts[status.state] += 1
     counts["steps_done"] = sum(s.steps if s.state == "done" else s.step for s in statuses)

@@ -123,13 +123,12 @@ class OOPS:
         learner = self._atoms(observations)
         selection = self.config.demo_selection
         if selection == "pooled":
-            pooled = np.concatenate(self.expert_atoms)
-            index, coupling = None, self._solve(learner, pooled, -1)
+            index, coupling = None, self._solve(learner, -1)
         elif selection == "random":
             index = int(self.rng.integers(len(self.expert_atoms)))
-            coupling = self._solve(learner, self.expert_atoms[index], index)
+            coupling = self._solve(learner, index)
         else:
-            solved = [self._solve(learner, e, i) for i, e in enumerate(self.expert_atoms)]
+            solved = [self._solve(learner, i) for i in range(len(self.expert_atoms))]
             index = int(np.argmin([s.cost for s in solved]))
             coupling = solved[index]
         num_steps = len(learner)
@@ -147,7 +146,7 @@ class OOPS:
         transported costs, before OOPS's reward scale."""
         observations = check_episode(observations, self.obs_dim)
         learner = self._atoms(observations)
-        return [self._solve(learner, e, i) for i, e in enumerate(self.expert_atoms)]
+        return [self._solve(learner, i) for i in range(len(self.expert_atoms))]
 
     def state(self) -> RewardState:
         """The demo draws' generator state, and the potentials kept for warm starts as named
@@ -168,6 +167,27 @@ class OOPS:
             k: (np.asarray(arrays[f"f_{k}"]), np.asarray(arrays[f"g_{k}"])) for k in keys
         }
 
+    def atoms(self, observations: np.ndarray) -> np.ndarray:
+        """One episode's atoms (T, width) as OOPS compares them: its standardised states (with
+        the time index where configured) made into transitions or states; ``cost`` takes them."""
+        return self._atoms(check_episode(observations, self.obs_dim))
+
+    def cost(self, learner: np.ndarray, demo: int) -> np.ndarray:
+        """The ground cost (n, m) OOPS transports between an episode's atoms (``atoms``) and
+        demo ``demo``'s (-1: all demos' atoms pooled): the metric, times 1 + |i/n - j/m| with
+        ``time_weighted_cost``."""
+        cfg = self.config
+        expert = np.concatenate(self.expert_atoms) if demo == -1 else self.expert_atoms[demo]
+        cost = cost_matrix(learner, expert, cfg.metric)
+        if cfg.time_weighted_cost:
+            # demo -1: the pooled demos, each atom at its position within its own demo.
+            expert_positions = (
+                np.concatenate(self.expert_positions) if demo == -1 else self.expert_positions[demo]
+            )
+            gap = np.abs(_positions(len(learner))[:, None] - expert_positions[None, :])
+            cost = cost * (1.0 + gap).astype(cost.dtype)
+        return cost
+
     def _atoms(self, observations: np.ndarray) -> np.ndarray:
         """An episode's atoms: its standardised states, with the time index where configured."""
         states = self.standardizer(observations)
@@ -177,16 +197,9 @@ class OOPS:
             states = np.concatenate([states, time_to_go[:, None].astype(states.dtype)], axis=1)
         return make_atoms(states, self.config.atoms)
 
-    def _solve(self, learner: np.ndarray, expert: np.ndarray, key: int) -> OTResult:
+    def _solve(self, learner: np.ndarray, key: int) -> OTResult:
         cfg = self.config
-        cost = cost_matrix(learner, expert, cfg.metric)
-        if cfg.time_weighted_cost:
-            # key -1: the pooled demos, each atom at its position within its own demo.
-            expert_positions = (
-                np.concatenate(self.expert_positions) if key == -1 else self.expert_positions[key]
-            )
-            gap = np.abs(_positions(len(learner))[:, None] - expert_positions[None, :])
-            cost = cost * (1.0 + gap).astype(cost.dtype)
+        cost = self.cost(learner, key)
         init = self._potentials.get(key) if cfg.warm_start else None
         if init is not None and (init[0].shape[0], init[1].shape[0]) != cost.shape:
             # A learner episode of another length, or a state saved against other demos.

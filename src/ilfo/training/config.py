@@ -26,6 +26,25 @@ DEFAULT_START_STEPS = 10_000
 """Uniformly random steps before the policy acts, where neither the run nor its algo says (the
 OOPS paper's code)."""
 
+MAX_EVAL_EPISODES = 10_000
+"""The most episodes one evaluation runs (``eval_episodes``, ``ilfo eval --episodes``): each is
+a whole fixed-horizon episode (1,000 steps in the paper's envs), so 10,000 are hours of
+rollouts per evaluation already; more is a typo (a billion's list of seeds alone took 23 GB
+before the kernel killed the run, with no message)."""
+
+
+def check_eval_episodes(episodes: int, setting: str) -> None:
+    """A ValueError naming ``setting`` (the field or flag) where ``episodes`` is not an integer
+    from 1 to ``MAX_EVAL_EPISODES``: the one check of an evaluation's number of episodes."""
+    if isinstance(episodes, bool) or not isinstance(episodes, numbers.Integral):
+        raise ValueError(f"{setting} must be an integer, got {episodes!r}")
+    if not 1 <= episodes <= MAX_EVAL_EPISODES:
+        raise ValueError(
+            f"{setting} must be from 1 to {MAX_EVAL_EPISODES:,} (episodes per evaluation, each "
+            f"a whole episode), got {episodes:,}"
+        )
+
+
 Algo = Literal[tuple(ALGOS)]  # type: ignore[valid-type]
 """The names of ``ilfo.algos.ALGOS``, made from the registry (the CLI's ``--algo`` choices)."""
 
@@ -82,7 +101,7 @@ class TrainConfig:
     eval_every: int = 5_000
     """Evaluate every this many environment steps."""
     eval_episodes: int = 10
-    """Deterministic episodes per evaluation."""
+    """Deterministic episodes per evaluation (at most ``MAX_EVAL_EPISODES``, 10,000)."""
     best_by: Literal["score", "return"] = "score"
     """Which evaluation picks best_policy.msgpack: ``score`` (the paper's fixed-horizon score)
     or ``return`` (the standard return, which stops at the first fall: what an expert is judged
@@ -167,6 +186,7 @@ class TrainConfig:
         for name in counts:
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        check_eval_episodes(self.eval_episodes, "eval_episodes (--eval-episodes)")
         if AGENT_PARTS[algo.agent].on_policy and self.updates_per_step != 1:
             # Ignored, it would make a sweep's updates-per-step comparison silently wrong.
             raise ValueError(

@@ -69,6 +69,7 @@ from ilfo.training.run_dir import (
     read_demos_record,
     read_run_config,
     remove_incomplete_checkpoints,
+    results_past_first_checkpoint,
 )
 
 _NOTHING = contextlib.nullcontext()
@@ -549,8 +550,11 @@ class Trainer:
         TensorBoard's are hidden), the best policy is the checkpoint's again
         (``checkpoint.restore_best_policy``), what a killed checkpoint write left is removed,
         and a new ``steps`` is written to config.json. A run killed before its first checkpoint
-        starts again from step 0 (with a warning). The returned trainer owns the run directory
-        (``RunDirInUse`` if another process does) until its ``train`` returns.
+        starts again from step 0 (with a warning); one with no complete checkpoint that holds
+        what only a run past its first writes (``run_dir.results_past_first_checkpoint``: a
+        finished run whose checkpoints were removed) is refused with a ValueError, its files
+        untouched. The returned trainer owns the run directory (``RunDirInUse`` if another
+        process does) until its ``train`` returns.
         """
         run_dir = Path(run_dir)
         raw = read_run_config(run_dir)
@@ -565,6 +569,15 @@ class Trainer:
             if damaged is not None:
                 raise FileNotFoundError(damaged_checkpoint_message(damaged))
             if checkpoint is None:
+                results = results_past_first_checkpoint(run_dir, config)
+                if results is not None:
+                    raise ValueError(
+                        f"{run_dir} has no complete checkpoint but holds the results of a run "
+                        f"past its first one ({results}; its {CHECKPOINTS_DIR}/ removed?): "
+                        "nothing can be resumed, and starting again from step 0 would delete "
+                        "them; to train it again, start a new run from its config: ilfo train "
+                        f"--config {run_dir / CONFIG_FILE}"
+                    )
                 warnings.warn(
                     f"{run_dir} has no complete checkpoint yet: the run starts again from step 0",
                     stacklevel=2,

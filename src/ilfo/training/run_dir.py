@@ -11,15 +11,20 @@ started together (a sweep) from mixing, and keep a run resumable whatever moment
 - A checkpoint is written in ``checkpoints/.tmp_step_N`` and renamed to ``checkpoints/step_N``
   when complete, so every ``step_N`` directory is a whole checkpoint; ``latest_checkpoint`` picks
   the newest by scanning them (no pointer file that a kill could leave missing or stale).
+- A run with no complete checkpoint starts again from step 0 only where it holds nothing a run
+  writes after its first checkpoint (``results_past_first_checkpoint``): a finished run whose
+  checkpoints were removed keeps its results, and is not resumed.
 - ``read_run_config`` and ``load_run_policy`` read a run directory for any reader (evaluation,
   experts, bench scripts), with a ``ValueError`` naming the file for a damaged one.
 """
 
 from __future__ import annotations
 
+import csv
 import errno
 import fcntl
 import json
+import math
 import os
 import re
 import shutil
@@ -203,6 +208,82 @@ def remove_incomplete_checkpoints(run_dir: str | Path) -> None:
             shutil.rmtree(path, ignore_errors=True)
     for name in ("latest", ".latest.tmp"):
         (root / name).unlink(missing_ok=True)
+
+
+CHECKPOINT_CLOCK_SLACK_S = 1.0
+"""How far a row's ``wall_time`` must pass ``checkpoint_minutes`` for a checkpoint to have been
+due after it for certain: the loop times the clock's interval from a moment just after the one
+``wall_time`` counts from."""
+
+
+def results_past_first_checkpoint(run_dir: str | Path, config: TrainConfig) -> str | None:
+    """What run ``run_dir`` holds that only a run past its first checkpoint writes, in words
+    (``"6 metrics rows to step 600, policy.msgpack, best_policy.msgpack"``), else None.
+
+    A run writes its metrics row of an episode, then the checkpoint that falls due at it
+    (``config.checkpoint_every`` steps, ``config.checkpoint_minutes`` of training, the end of
+    its steps), so one killed before (or while writing) its first checkpoint holds its config,
+    the rows up to the one that checkpoint fell due at, and the best policy of their
+    evaluations: what a start from step 0 writes again. A row after that one, a final policy
+    (written after the last checkpoint) or a best policy of a later step show that a
+    checkpoint was written: with none left (``checkpoints/`` removed), a start from step 0
+    would delete them. ``config`` is the run's (its checkpoint settings)."""
+    run_dir = Path(run_dir)
+    rows = _logged_rows(run_dir / METRICS_FILE)
+    first_due_step = min(config.checkpoint_every, config.steps)
+    clock_s = 60.0 * config.checkpoint_minutes or math.inf
+    due = next(
+        (
+            k
+            for k, (step, wall_time) in enumerate(rows)
+            if step >= first_due_step or wall_time >= clock_s + CHECKPOINT_CLOCK_SLACK_S
+        ),
+        None,
+    )
+    past = (run_dir / FINAL_POLICY_FILE).is_file() or (due is not None and due < len(rows) - 1)
+    best_step = _best_policy_step(run_dir)
+    if best_step is not None and best_step > (rows[due][0] if due is not None else first_due_step):
+        past = True
+    if not past:
+        return None
+    held = [f"{len(rows):,} metrics rows to step {rows[-1][0]:,}"] if rows else []
+    held += [
+        name
+        for name in (FINAL_POLICY_FILE, BEST_POLICY_FILE, BEST_POLICY_INFO)
+        if (run_dir / name).is_file()
+    ]
+    return ", ".join(held)
+
+
+def _logged_rows(path: Path) -> list[tuple[int, float]]:
+    """(step, wall_time) of each whole row of a metrics.csv (none where it is missing); a row
+    a kill cut short, or one without a step, is skipped, as ``metrics.truncate_metrics`` drops
+    it. A row without a wall time has ``-inf``."""
+    if not path.is_file():
+        return []
+    rows = []
+    with path.open(newline="", encoding="utf-8", errors="replace") as f:
+        for row in csv.DictReader(f):
+            step = row.get("step")
+            if None in row.values() or step is None or not step.isdigit():
+                continue
+            try:
+                wall_time = float(row.get("wall_time") or "-inf")
+            except ValueError:
+                wall_time = -math.inf
+            rows.append((int(step), wall_time))
+    return rows
+
+
+def _best_policy_step(run_dir: Path) -> int | None:
+    """The step of the run's best policy (``BEST_POLICY_INFO``), None without a readable one."""
+    path = run_dir / BEST_POLICY_INFO
+    if not path.is_file():
+        return None
+    try:
+        return int(json.loads(path.read_text(encoding="utf-8"))["step"])
+    except (ValueError, KeyError, TypeError):
+        return None
 
 
 def read_run_config(run_dir: str | Path) -> dict[str, Any]:
