@@ -146,3 +146,19 @@ def test_demos_collect_refuses_a_negative_seed(tmp_path, capsys):
     args = ["demos", "collect", "--expert", "Hopper-v5", "-n", "1", "--seed", "-1"]
     assert main([*args, "--out", str(out)]) == 2
     assert "seeds must be >= 0, got -1" in capsys.readouterr().err and not out.exists()
+
+
+def test_an_accelerator_jax_cannot_start_is_a_clear_error():
+    # Without a CUDA build of JAX, JAX_PLATFORMS=cuda ends in a bare AssertionError inside JAX.
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "JAX_PLATFORMS": "cuda"}
+    done = subprocess.run(
+        [sys.executable, "-m", "ilfo.cli", "reward"], env=env, capture_output=True, text=True
+    )
+    assert done.returncode == 2, done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith("ilfo: error: JAX_PLATFORMS=cuda: JAX cannot start 'cuda'")
+    assert "unset JAX_PLATFORMS" in last and "Traceback" not in done.stderr

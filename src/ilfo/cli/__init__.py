@@ -10,7 +10,7 @@ import warnings
 from collections.abc import Sequence
 from typing import TextIO
 
-from ilfo.cli._common import Parser
+from ilfo.cli._common import Parser, check_jax_platforms
 from ilfo.cli._common import _command as _command  # re-exported: ilfo.cli._command
 from ilfo.cli.data import _add_demos_parser, _add_label_parser, _add_reward_parser
 from ilfo.cli.diagnose import _add_diagnose_parser
@@ -56,6 +56,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         with warnings.catch_warnings():  # restores the default display on the way out
             warnings.showwarning = _show_warning
+            check_jax_platforms()
             enable_compilation_cache()  # before the first compilation; see its module
             return args.run(args)
     except (ValueError, FileNotFoundError) as err:

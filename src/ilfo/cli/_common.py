@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import shlex
 import shutil
 import signal
@@ -32,6 +33,29 @@ class Parser(argparse.ArgumentParser):
             usage = f"usage: {self.prog} [options]  (all of them: {command} --help)\n"
         sys.stderr.write(usage)
         self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def check_jax_platforms() -> None:
+    """A ValueError saying what to do where ``JAX_PLATFORMS`` names an accelerator this JAX
+    cannot start (without a CUDA build of JAX, ``JAX_PLATFORMS=cuda`` ends in a bare
+    AssertionError deep inside JAX at the first array)."""
+    wanted = [p.strip() for p in os.environ.get("JAX_PLATFORMS", "").split(",") if p.strip()]
+    accelerators = [p for p in wanted if p != "cpu"]
+    if not accelerators:
+        return
+    import jax  # only here: most commands import it anyway, and only this check needs it now
+
+    for platform in accelerators:
+        try:
+            jax.devices(platform)
+        except (RuntimeError, AssertionError) as err:
+            detail = str(err).split("\n")[0] or type(err).__name__
+            raise ValueError(
+                f"JAX_PLATFORMS={os.environ['JAX_PLATFORMS']}: JAX cannot start {platform!r} "
+                f"here ({detail}). For an NVIDIA GPU install a CUDA build of JAX (pip install "
+                "'jax[cuda12]', the same version as ilfo's jax); to run on the CPU, unset "
+                "JAX_PLATFORMS. ilfo's GPU runs are untested."
+            ) from None
 
 
 def _command() -> str:
