@@ -555,3 +555,18 @@ def test_numpy_integers_are_taken_as_ints():
     config = TrainConfig(**{**TINY, "seed": np.int64(3), "steps": np.int32(400)})
     assert type(config.seed) is int and type(config.steps) is int
     assert json.loads(json.dumps(dataclasses.asdict(config)))["seed"] == 3
+
+
+def test_a_relative_demos_path_is_recorded_absolute(tmp_path, monkeypatch, capsys):
+    # Recorded as given, `ilfo eval RUN` and `--resume` from another directory could not find
+    # the demos.
+    work = tmp_path / "work"
+    work.mkdir()
+    shutil.copy(DEMOS, work / "demos.npz")
+    monkeypatch.chdir(work)
+    run = _train(tmp_path, "run", demos="demos.npz", steps=200)
+    recorded = json.loads((run / "config.json").read_text())["demos"]
+    assert recorded == str(work / "demos.npz")
+    monkeypatch.chdir(tmp_path)
+    assert main(["eval", str(run), "--episodes", "1", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out.splitlines()[-1])["episodes"] == 1

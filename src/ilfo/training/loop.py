@@ -181,6 +181,8 @@ class Trainer:
                 "Trainer.resume (ilfo train --resume), or choose another directory"
             )
         resolved = self.config.resolved(self.horizon)  # every setting, as the run uses it
+        if resolved.demos is not None:  # absolute: eval and resume work from any directory
+            resolved = dataclasses.replace(resolved, demos=str(Path(resolved.demos).resolve()))
         write_json_atomic(config_path, dataclasses.asdict(resolved))
         if self.demo_source is not None:
             write_json_atomic(self.run_dir / DEMOS_RECORD_FILE, self.demo_source.as_record(0))
