@@ -570,3 +570,21 @@ def test_a_relative_demos_path_is_recorded_absolute(tmp_path, monkeypatch, capsy
     monkeypatch.chdir(tmp_path)
     assert main(["eval", str(run), "--episodes", "1", "--json"]) == 0
     assert json.loads(capsys.readouterr().out.splitlines()[-1])["episodes"] == 1
+
+
+def test_scores_are_not_normalised_by_a_negative_demo_return(tmp_path):
+    # Pendulum's returns are negative: a learner at -1404 over a demo at -123 read 11.4.
+    from ilfo import demos as demo_io
+
+    rng = np.random.default_rng(0)
+    episode = demo_io.Episode(
+        observations=rng.normal(size=(201, 3)).astype(np.float32), rewards=np.full(200, -0.6)
+    )
+    path = tmp_path / "pendulum.npz"
+    demo_io.save(path, [episode], env_id="Pendulum-v1")
+    settings = {**TINY, "env": "Pendulum-v1", "demos": str(path), "horizon": None, "steps": 400}
+    with pytest.warns(UserWarning, match="mean return is -120, not positive"):
+        run = Trainer(TrainConfig(**settings), tmp_path / "run", progress=False).train()
+    evals = [r for r in _metrics(run) if r["eval_score"]]
+    assert evals and all(r["eval_score_norm"] == "" for r in evals)
+    assert float(evals[-1]["eval_score"]) < 0

@@ -131,7 +131,7 @@ class DemoSet(NamedTuple):
     """Each (T_i + 1, obs_dim); empty for task-reward algos."""
     mean_return: float
     """Their mean task score (what scores are divided by); NaN where none was recorded or it is
-    0 (scores are then left unnormalised)."""
+    not positive (scores are then left unnormalised)."""
     distance_probe: OOPS | None
     """OOPS against the first demo with the paper's defaults: the OT distance that evaluations
     log (None without demos)."""
@@ -154,7 +154,15 @@ def load_demo_set(config: TrainConfig, obs_dim: int) -> DemoSet:
         )
     returns = [e.task_score for e in episodes if e.task_score is not None]
     mean = float(np.mean(returns)) if returns else math.nan
-    if mean == 0:  # nothing to divide a score by
+    if not mean > 0:
+        # A score over a zero or negative return means nothing (Pendulum: a learner at -1404
+        # over a demo at -123 would read 11.4 of the expert), so scores stay unnormalised.
+        if returns:
+            warnings.warn(
+                f"{demos_path(config)}: the demos' mean return is {mean:.6g}, not positive: "
+                "normalised scores are undefined for this run, raw scores are logged",
+                stacklevel=2,
+            )
         mean = math.nan
     path = demos_path(config)
     source = DemoSource(str(path.resolve()), file_sha256(path), len(episodes), mean)
