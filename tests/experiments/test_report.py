@@ -228,7 +228,7 @@ def test_a_cell_whose_shipped_expert_is_weaker_than_the_papers_says_so(tmp_path)
     table = (tmp_path / "report" / "report.md").read_text()
     rows = {line.split(" | ")[0].strip("| "): line for line in table.splitlines()}
     assert f"within (expert at {duck:.0%} of the paper's)" in rows["MinitaurBulletDuckEnv-v0"]
-    assert "expert at" not in rows["Hopper-v5"] and "| within |" in rows["Hopper-v5"]
+    assert "expert at" not in rows["Hopper-v5"] and "| within (1 seed" in rows["Hopper-v5"]
     assert "| other demos |" in rows["Walker2d-v5"]
     with (tmp_path / "report" / "cells.csv").open() as f:
         fractions = {r["env"]: r["expert_fraction_of_paper"] for r in csv.DictReader(f)}
@@ -309,6 +309,7 @@ def test_a_run_at_the_defaults_has_no_settings_to_name(algo, tmp_path):
     assert read_run(run).settings == ()
     (run / "config.json").write_text(json.dumps(_written_config(algo=algo, preset="fast")))
     uses_preset = algo in ("oops-td3", "oops-ddpg", "pwil-td3", "oops-adv-td3", "td3")
+    uses_preset |= algo in ("oops-td7", "td7")  # TD7's presets size it too
     assert read_run(run).settings == (("fast preset",) if uses_preset else ())
 
 
@@ -453,3 +454,20 @@ def test_table4_algos_are_compared_with_oops_td3(tmp_path):
     paper = paper_ablation("Hopper-v5", "oops_adv")
     seeds = "1 (1 unfinished, from step 2,000); 1"  # its own; OOPS+TD3's
     assert f"| Hopper-v5 | oops-adv-td3 | 1 | oops_adv | {seeds} | -25.0 | {paper.text} |" in text
+
+
+def test_a_one_seed_cell_claims_no_spread_or_interval(tmp_path):
+    _fake_run(tmp_path, "h0", env="Hopper-v5", algo="oops-td3", seed=0, scores=[0.5, 0.97])
+    for seed, score in enumerate([0.9, 0.8]):
+        _fake_run(tmp_path, f"w{seed}", env="Walker2d-v5", algo="oops-td3", seed=seed,
+                  scores=[0.5, score])  # fmt: skip
+    report = build_report(collect_runs([tmp_path])[0], resamples=50)
+    write_report(report, tmp_path / "out", sources=[])
+    rows = (tmp_path / "out" / "report.md").read_text().splitlines()
+    (hopper,) = [r for r in rows if r.startswith("| Hopper-v5 | oops-td3 |")]
+    (walker,) = [r for r in rows if r.startswith("| Walker2d-v5 | oops-td3 |")]
+    ilfo_columns = hopper.split(" | ")[5:8]  # mean, IQM, return: the paper's has its own ±
+    assert ilfo_columns[:2] == ["0.97", "- (1 seed)"]
+    assert "±" not in " ".join(ilfo_columns) and "[0.97" not in hopper
+    assert "within (1 seed: a single draw)" in hopper
+    assert "0.85 ± 0.05 | 0.85 [" in walker and "1 seed" not in walker

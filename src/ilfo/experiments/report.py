@@ -592,11 +592,22 @@ def improvement_rows(report: Report) -> list[dict[str, object]]:
     return rows
 
 
+def _spread_text(cell: Cell) -> str:
+    """The mean +- std and IQM [CI] columns; one seed has neither a spread nor an interval,
+    so its cell shows its score alone ("0.94 ± 0.00" and "[0.94, 0.94]" would claim one)."""
+    if len(cell.runs) == 1:
+        return f"{_fmt(cell.mean)} | - (1 seed)"
+    return f"{_fmt(cell.mean)} ± {_fmt(cell.std)} | {cell.iqm}"
+
+
 def _versus_paper_text(cell: Cell) -> str:
+    verdict = cell.versus_paper
     fraction = cell.expert_fraction
-    if not cell.versus_paper or fraction is None or fraction >= STRONG_EXPERT:
-        return cell.versus_paper
-    return f"{cell.versus_paper} (expert at {fraction:.0%} of the paper's)"
+    if verdict and fraction is not None and fraction < STRONG_EXPERT:
+        verdict += f" (expert at {fraction:.0%} of the paper's)"
+    if cell.versus_paper in ("within", "above", "below") and len(cell.runs) == 1:
+        verdict += " (1 seed: a single draw)"
+    return verdict
 
 
 def cell_rows(report: Report) -> list[dict[str, object]]:
@@ -679,7 +690,7 @@ def write_report(report: Report, out: str | Path, *, sources: Sequence[str] = ()
         paper = "" if c.paper is None or c.variant else c.paper.text
         lines.append(
             f"| {c.env} | {c.algo} | {c.num_demos} | {c.variant or ''} | {_seeds_text(c)} | "
-            f"{_fmt(c.mean)} ± {_fmt(c.std)} | {c.iqm} | {_fmt(row['return_norm_mean'])} | "
+            f"{_spread_text(c)} | {_fmt(row['return_norm_mean'])} | "
             f"{paper} | {_versus_paper_text(c)} | {c.settings_text} |"
         )
     variants = [
