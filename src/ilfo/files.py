@@ -7,11 +7,13 @@ of it.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
 import tomllib
 import zipfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -19,16 +21,79 @@ import flax.serialization
 import jax
 import numpy as np
 
+from ilfo.npz_check import check_npz
+
 T = TypeVar("T")
+
+
+@contextlib.contextmanager
+def naming(path: str | Path) -> Iterator[None]:
+    """Inside it, an OSError that names no file (a write to a full disk, a failed flush) is
+    raised again naming ``path``, which the command line prints (``ilfo.cli``)."""
+    try:
+        yield
+    except OSError as err:
+        if err.filename is not None:
+            raise
+        raise OSError(err.errno, err.strerror or str(err), str(path)) from err
+
+
+def temporary_name(path: str | Path) -> Path:
+    """A temporary file beside ``path`` for a write then rename, its own to this process (two
+    processes writing ``path`` at once must not share one: the second rename finds none)."""
+    path = Path(path)
+    return path.with_name(f".{path.name}.{os.getpid()}.tmp")
+
+
+def write_bytes_atomic(path: str | Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary file and a rename: a reader (or a kill)
+    never sees a half-written file; an OSError (a full disk) names ``path``."""
+    path = Path(path)
+    tmp = temporary_name(path)
+    try:
+        with naming(path):
+            tmp.write_bytes(data)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def write_json_atomic(path: str | Path, value: Any) -> None:
     """Write ``value`` as JSON to ``path`` through a temporary file and a rename: a reader (or a
-    kill) never sees a half-written file."""
+    kill) never sees a half-written file; an OSError (a full disk) names ``path``."""
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(value, indent=2) + "\n")
-    os.replace(tmp, path)
+    tmp = temporary_name(path)
+    try:
+        with naming(path):
+            tmp.write_text(json.dumps(value, indent=2) + "\n")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def parse_json(text: str, path: str | Path) -> Any:
+    """``text``, the contents of the JSON file ``path``, parsed; a one-line ValueError naming
+    the file where it is not JSON or nests too deeply to parse (a RecursionError else)."""
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{path} is not valid JSON ({err})") from None
+    except RecursionError:
+        raise ValueError(f"{path} is not readable JSON: its values are nested too deeply") from None
+
+
+def read_json(path: str | Path) -> Any:
+    """The JSON file at ``path``, parsed (``parse_json``); a ValueError naming it where it is
+    not UTF-8 text."""
+    path = Path(path)
+    return parse_json(_read_text(path), path)
+
+
+def _read_text(path: Path) -> str:
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        raise ValueError(f"{path} is not UTF-8 text ({err.reason} at byte {err.start})") from None
 
 
 def sync_tree(path: str | Path) -> None:
@@ -102,6 +167,7 @@ def load_npz(path: str | Path, what: str) -> dict[str, np.ndarray]:
     path = Path(path)
     if not zipfile.is_zipfile(path):
         raise ValueError(f"{path} is not a {what} file (not an .npz archive)")
+    check_npz(path, f"{what} file")
     try:
         with np.load(path, allow_pickle=False) as archive:
             return {k: archive[k] for k in archive.files}
@@ -122,16 +188,15 @@ def read_settings_file(path: str | Path) -> dict[str, Any]:
         raise ValueError(f"{path} is a directory, not a settings file{hint}")
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such settings file")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as err:
-        raise ValueError(f"{path} is not UTF-8 text ({err.reason} at byte {err.start})") from None
-    try:
-        raw = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
-    except (json.JSONDecodeError, tomllib.TOMLDecodeError) as err:
-        raise ValueError(
-            f"{path} is not valid {path.suffix.lstrip('.').upper() or 'JSON'} ({err})"
-        ) from None
+    if path.suffix != ".toml":
+        raw = read_json(path)
+    else:
+        try:
+            raw = tomllib.loads(_read_text(path))
+        except tomllib.TOMLDecodeError as err:
+            raise ValueError(f"{path} is not valid TOML ({err})") from None
+        except RecursionError:
+            raise ValueError(f"{path} is not readable TOML: nested too deeply") from None
     if not isinstance(raw, dict):
         raise ValueError(f"{path} must hold an object of settings, not {type(raw).__name__}")
     return raw

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from ilfo import demos
+from ilfo.demos.env_check import check_observation_width
 from ilfo.envs import CONTACT_FORCE_DIMS, FULL_OBSERVATION_DIMS, match_observation_width
 from ilfo.paths import bundled_demos
 from ilfo.rewards import OOPS, PWIL, OOPSConfig
@@ -79,6 +80,7 @@ def _add_reward_parser(sub: argparse._SubParsersAction) -> None:
 def _run_reward(args: argparse.Namespace) -> int:
     path = args.demos or bundled_demos("Hopper-v5-scripted")
     data = demos.load(path)
+    check_observation_width(data, path)
     episodes = [e.observations for e in data.episodes]
     dropped = imitation_drops_contact_forces(data.env_id, args.contact_forces)
     if dropped:  # a file already without them is left as it is
@@ -220,7 +222,9 @@ def _run_demos_collect(args: argparse.Namespace) -> int:
 
 
 def _run_demos_info(args: argparse.Namespace) -> int:
-    summary = demos.summarize(demos.load_any(args.file))
+    data = demos.load_any(args.file)
+    check_observation_width(data, args.file)
+    summary = demos.summarize(data)
     if args.json:
         print(json.dumps(summary))
         return 0

@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from ilfo.npz_check import check_npz
+
 SCHEMA_VERSION = 1
 
 FLOAT32_TOLERANCE = 1e-4
@@ -129,6 +131,10 @@ def save(
         with open(tmp, "wb") as file:  # a file object: numpy adds no suffix
             np.savez_compressed(file, **arrays)
         os.replace(tmp, target)
+    except OSError as err:  # a full disk: the message names the file (ilfo.cli prints it)
+        if err.filename is not None:
+            raise
+        raise OSError(err.errno, err.strerror or str(err), str(path)) from err
     finally:
         tmp.unlink(missing_ok=True)
 
@@ -170,6 +176,7 @@ def load(path: str | Path) -> DemoFile:
             f"{path} is not an .npz archive; for D4RL, Minari or imitation files use "
             "ilfo.demos.load_any (or `ilfo demos convert` to make an ilfo file)"
         )
+    check_npz(path)  # encrypted, foreign compression, a header declaring terabytes
     try:
         with np.load(path, allow_pickle=False) as archive:
             data = {k: archive[k] for k in archive.files}

@@ -58,6 +58,7 @@ import numpy as np
 
 from ilfo.demos.npz import DemoFile, Episode, checked_episodes, numeric_array
 from ilfo.demos.npz import load as _load_ilfo
+from ilfo.npz_check import check_npz
 
 Format = Literal["ilfo", "imitation", "minari", "d4rl"]
 FORMATS: tuple[str, ...] = ("ilfo", "imitation", "minari", "d4rl")
@@ -456,18 +457,14 @@ def _h5py() -> Any:
 
 
 def _npz_keys(path: Path) -> list[str]:
-    try:
-        with zipfile.ZipFile(path) as z:
-            names = z.namelist()
-    except _NPZ_ERRORS as err:
-        raise ValueError(f"{path} is not a readable .npz archive ({err})") from None
-    return [n.removesuffix(".npy") for n in names]
+    return [n.removesuffix(".npy") for n in check_npz(path)]
 
 
 def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
     """Every array of an .npz, with allow_pickle=False; object arrays are skipped, not loaded."""
     data: dict[str, np.ndarray] = {}
     skipped: list[str] = []
+    check_npz(path)
     try:
         with np.load(path, allow_pickle=False) as archive:
             for key in archive.files:
@@ -549,6 +546,8 @@ def _read_json(path: Path) -> dict[str, Any]:
         out = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
         raise ValueError(f"{path} is not readable JSON ({err})") from None
+    except RecursionError:
+        raise ValueError(f"{path} is not readable JSON: nested too deeply") from None
     if not isinstance(out, dict):
         raise ValueError(f"{path} does not hold a JSON object")
     return out

@@ -1,7 +1,9 @@
 """Experiments: sweeps of many runs (``sweep``: the manifest and each run's state on disk;
-``backends``: the scheduler, local or on Ray; ``worker``: one run in its own process) and reports
-over them (``stats``, ``report``, ``paper``)."""
+``attempts``: each run's records of its workers' starts and ends; ``backends``: the
+scheduler, local or on Ray; ``worker``: one run in its own process) and reports over them
+(``stats``, ``report``, ``paper``)."""
 
+from ilfo.experiments.attempts import read_attempts, record_attempt
 from ilfo.experiments.backends import (
     LocalBackend,
     RayBackend,
@@ -19,8 +21,6 @@ from ilfo.experiments.sweep import (
     matching_sweep,
     open_sweep,
     parse_seeds,
-    read_attempts,
-    record_attempt,
     run_status,
     select_runs,
     snapshot_sweep,

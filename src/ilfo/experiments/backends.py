@@ -16,24 +16,24 @@ checkpoints first) and returns; starting the sweep again continues it.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import os
 import signal
 import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Collection, Sequence
+from collections.abc import Callable, Collection, Iterator, Sequence
 from typing import Any, Protocol
 
-from ilfo.experiments.sweep import (
-    RunStatus,
-    Sweep,
+from ilfo.experiments.attempts import (
+    claimed_cpus,
     read_attempts,
     record_attempt,
-    run_status,
-    summary,
-    sweep_labels,
+    unended_workers,
 )
+from ilfo.experiments.sweep import LAUNCH_LOCK, RunStatus, Sweep, run_status, summary, sweep_labels
 from ilfo.experiments.worker import EXIT_BUSY, PARENT_SIGNAL_ENV, thread_environment
 
 EXIT_INTERRUPTED = 130
@@ -100,21 +100,30 @@ def _alive(pid: object) -> bool:
 
 
 def cpus_of_live_workers(sweep: Sweep, exclude_pids: Collection[int] = ()) -> set[int]:
-    """The CPUs that the sweep's live workers on this host were pinned to (their last start
-    record without an end after it, whose process is alive), other than ``exclude_pids``'s:
-    what another ``sweep run`` process on the same sweep holds."""
+    """The CPUs that the sweep's live workers on this host were pinned to (each worker's
+    latest launch or start record without an end of its pid after it, whose process is alive:
+    ``attempts.unended_workers``), other than ``exclude_pids``'s: what another ``sweep run``
+    process on the same sweep holds."""
     host = socket.gethostname()
     claimed: set[int] = set()
     for run in sweep.runs:
-        events = read_attempts(sweep, run.name)
-        starts = [i for i, e in enumerate(events) if e.get("event") == "start"]
-        if not starts or any(e.get("event") == "end" for e in events[starts[-1] + 1 :]):
-            continue
-        start = events[starts[-1]]
-        pid = start.get("pid")
-        if start.get("host") == host and pid not in exclude_pids and _alive(pid):
-            claimed.update(int(c) for c in start.get("cpus") or ())
+        for record in unended_workers(read_attempts(sweep, run.name)):
+            pid = record.get("pid")
+            if record.get("host") == host and pid not in exclude_pids and _alive(pid):
+                claimed |= claimed_cpus(record)
     return claimed
+
+
+@contextlib.contextmanager
+def _launch_lock(sweeps: Collection[Sweep]) -> Iterator[None]:
+    """Hold every sweep's ``LAUNCH_LOCK`` (in one order, so that two processes cannot each
+    wait on the other's): while a process chooses a worker's CPUs and records its launch, no
+    other chooses any on these sweeps."""
+    with contextlib.ExitStack() as stack:
+        for root in sorted({str(sweep.root.resolve()) for sweep in sweeps}):
+            lock = stack.enter_context(open(os.path.join(root, LAUNCH_LOCK), "a"))
+            fcntl.flock(lock, fcntl.LOCK_EX)
+        yield
 
 
 class LocalBackend:
@@ -182,14 +191,18 @@ class LocalBackend:
         self._sweeps.update((str(sweep.root), sweep) for sweep in sweeps)
 
     def start(self, sweep: Sweep, name: str, slot: int) -> Job:
-        env = {
-            **os.environ,
-            **thread_environment(self.cores_per_run, self.cpu_set(sweep, slot)),
-            PARENT_SIGNAL_ENV: "1",
-        }
+        """Start the run's worker on CPUs of its own, recorded at once as its launch (the
+        worker records its start only once Python and ilfo are loaded, seconds later)."""
         log = sweep.log_file(name)
         log.parent.mkdir(parents=True, exist_ok=True)
-        with log.open("ab") as out:
+        self._sweeps[str(sweep.root)] = sweep
+        with _launch_lock(list(self._sweeps.values())), log.open("ab") as out:
+            cpus = self.cpu_set(sweep, slot)
+            env = {
+                **os.environ,
+                **thread_environment(self.cores_per_run, cpus),
+                PARENT_SIGNAL_ENV: "1",
+            }
             process = subprocess.Popen(
                 worker_command(sweep, name),
                 env=env,
@@ -198,6 +211,7 @@ class LocalBackend:
                 stderr=subprocess.STDOUT,
                 start_new_session=True,  # Ctrl-C at the terminal reaches the sweep, which relays it
             )
+            record_attempt(sweep, name, "launch", pid=process.pid, cpus=cpus, sweep_pid=os.getpid())
         self._jobs[slot] = _ProcessJob(name, process)
         return self._jobs[slot]
 
@@ -402,9 +416,7 @@ def _schedule(
                     # Killed (OOM, SIGKILL, a lost node), or it failed before it could record
                     # its end (a full disk, a bad pin): counted as a failure, so that the
                     # retries bound it.
-                    record_attempt(
-                        sweeps[key[0]], key[1], "end", status="killed", error=f"worker exit {code}"
-                    )
+                    _record_killed(sweeps[key[0]], key[1], job, code)
                 status = refresh(key)
                 if status.state == "pending":
                     enqueue(key)  # an error within the retries, or an interruption
@@ -435,6 +447,13 @@ def _schedule(
     finally:
         backend.close()
     return [refresh(key) for key in runs]
+
+
+def _record_killed(sweep: Sweep, name: str, job: Job, code: int) -> None:
+    """The end of a worker that exited without recording its own, with its pid (where known:
+    a Ray task's is not), so that its launch and start no longer hold its CPUs."""
+    pid = getattr(getattr(job, "process", None), "pid", None)
+    record_attempt(sweep, name, "end", status="killed", error=f"worker exit {code}", pid=pid)
 
 
 def _ended(status: RunStatus, code: int) -> str:

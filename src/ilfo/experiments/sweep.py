@@ -5,8 +5,8 @@ directory holds::
 
     sweep.json            the spec as given and every run's full config (the manifest)
     runs/NAME/            each run's ordinary run directory (``ilfo train``'s layout)
-    attempts/NAME.jsonl   one line per start and end of the run's worker (host, CPUs, threads,
-                          exit, error)
+    attempts/NAME.jsonl   one line per launch, start and end of the run's workers (host, pid,
+                          CPUs, threads, exit, error: ``attempts``)
     logs/NAME.log         the worker's output
 
 Nothing else records progress: a run is *done* when its final policy is written and its newest
@@ -25,20 +25,22 @@ from __future__ import annotations
 import dataclasses
 import fnmatch
 import json
-import os
-import socket
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from ilfo.experiments.attempts import read_attempts
 from ilfo.files import check_new_copy_dir, read_settings_file, write_json_atomic
 
 MANIFEST_FILE = "sweep.json"
 RUNS_DIR = "runs"
 ATTEMPTS_DIR = "attempts"
 LOGS_DIR = "logs"
+LAUNCH_LOCK = ".launch.lock"
+"""Held by a ``sweep run`` process while it chooses CPUs for a worker and starts it
+(``backends.LocalBackend``), so that two processes never choose the same ones."""
 SWEEP_PARTS = (RUNS_DIR, ATTEMPTS_DIR, LOGS_DIR)
 """The folders a sweep directory holds beside its manifest."""
 AXES = ("env", "algo", "num_demos", "seed")
@@ -333,10 +335,10 @@ def create_sweep(root: str | Path, spec: SweepSpec) -> Sweep:
         return existing
     if root.exists() and not root.is_dir():
         raise ValueError(f"{root} is a file, not a sweep directory")
-    # A manifest's leftover temporary file or the sweep's own folders: a sweep made before
-    # (whose manifest was lost); anything else is someone's folder.
-    ours = (*SWEEP_PARTS, f".{MANIFEST_FILE}.tmp")
-    others = sorted(p.name for p in root.iterdir() if p.name not in ours) if root.exists() else []
+    # The sweep's own folders, lock or a manifest's temporary file: a sweep made before (whose
+    # manifest was lost) or being made by another process now (its manifest may have
+    # appeared since it was looked for); anything else is someone's folder.
+    others = sorted(p.name for p in root.iterdir() if not _ours(p.name)) if root.exists() else []
     if others:
         raise ValueError(
             f"{root} holds other files and no sweep ({', '.join(others[:3])}"
@@ -345,6 +347,7 @@ def create_sweep(root: str | Path, spec: SweepSpec) -> Sweep:
     root.mkdir(parents=True, exist_ok=True)
     for sub in SWEEP_PARTS:
         (root / sub).mkdir(exist_ok=True)
+    matching_sweep(root, spec)  # one another process made meanwhile must be this sweep
     record = {
         "spec": spec.to_dict(),
         "runs": [{"name": r.name, "variant": r.variant, "config": r.config} for r in runs],
@@ -352,6 +355,12 @@ def create_sweep(root: str | Path, spec: SweepSpec) -> Sweep:
     }
     write_json_atomic(manifest, record)
     return Sweep(root, spec, runs)
+
+
+def _ours(name: str) -> bool:
+    """Whether a name in a sweep directory is one that a sweep, or its making, puts there."""
+    temporary = name.startswith(f".{MANIFEST_FILE}.") and name.endswith(".tmp")
+    return name in (*SWEEP_PARTS, MANIFEST_FILE, LAUNCH_LOCK) or temporary
 
 
 def matching_sweep(root: str | Path, spec: SweepSpec) -> Sweep | None:
@@ -379,8 +388,12 @@ def open_sweep(root: str | Path) -> Sweep:
     try:
         spec = SweepSpec.from_dict(raw["spec"], path)
         runs = tuple(SweepRun(r["name"], r["config"], r.get("variant")) for r in raw["runs"])
-    except (KeyError, TypeError) as err:
+    except (KeyError, TypeError, AttributeError) as err:
         raise ValueError(f"{path} is not a sweep manifest ({err!r} missing or wrong)") from None
+    for run in runs:  # what the scheduler reads of each run before its worker checks it
+        steps = run.config.get("steps") if isinstance(run.config, dict) else None
+        if type(steps) is not int or not isinstance(run.name, str):
+            raise ValueError(f"{path}: run {run.name!r} has steps {steps!r}, not a whole number")
     return Sweep(root, spec, runs)
 
 
@@ -569,36 +582,6 @@ def _metrics_rate(run_dir: Path, tail_bytes: int = 16384) -> float | None:
     if len(points) < 2 or points[-1][1] <= points[0][1]:
         return None
     return (points[-1][0] - points[0][0]) / (points[-1][1] - points[0][1])
-
-
-def read_attempts(sweep: Sweep, name: str) -> list[dict[str, Any]]:
-    """The run's attempt records, oldest first (a torn last line, from a kill, is skipped)."""
-    path = sweep.attempts_file(name)
-    if not path.is_file():
-        return []
-    events = []
-    for line in path.read_text(encoding="utf-8").splitlines():
-        try:
-            events.append(json.loads(line))
-        except json.JSONDecodeError:
-            continue
-    return events
-
-
-def record_attempt(sweep: Sweep, name: str, event: str, **fields: Any) -> None:
-    """Append one attempt record with the host and time: ``start``, ``end`` (with a status:
-    done, interrupted, error, killed, busy) or ``reset`` (the failures before it no longer
-    count)."""
-    path = sweep.attempts_file(name)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    line = {"event": event, "time": time.time(), "host": socket.gethostname(), **fields}
-    with path.open("ab+") as f:  # appends go to the end whatever was read
-        end = f.seek(0, os.SEEK_END)
-        if end:
-            f.seek(end - 1)
-            if f.read(1) != b"\n":  # a line a kill cut short: ended, or this one is glued on
-                f.write(b"\n")
-        f.write((json.dumps(line) + "\n").encode())
 
 
 def summary(statuses: Sequence[RunStatus]) -> dict[str, int]:

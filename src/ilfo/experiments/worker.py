@@ -77,12 +77,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         if os.getppid() == 1:  # the sweep died before the request took effect
             return 130
     cpus = pin_from_environment()
-    from ilfo.experiments.sweep import open_sweep, record_attempt, run_status
+    from ilfo.experiments.attempts import record_attempt
+    from ilfo.experiments.sweep import open_sweep, run_status
 
     sweep = open_sweep(args[0])
     run = sweep.run(args[1])
     threads = {name: os.environ.get(name) for name in (*THREAD_VARIABLES, "XLA_FLAGS")}
-    record_attempt(sweep, run.name, "start", pid=os.getpid(), cpus=cpus, threads=threads)
+    start = {"pid": os.getpid(), "sweep_pid": os.getppid(), "cpus": cpus, "threads": threads}
+    record_attempt(sweep, run.name, "start", **start)
     from ilfo.training.run_dir import RunDirInUse
 
     try:

@@ -25,7 +25,7 @@ from typing import Any
 import flax.serialization
 import numpy as np
 
-from ilfo.files import load_msgpack, load_npz, sync_dir, sync_tree
+from ilfo.files import load_msgpack, load_npz, naming, sync_dir, sync_tree
 from ilfo.replay import ReplayBuffer
 from ilfo.rewards import RewardState
 from ilfo.training.run_dir import (
@@ -78,17 +78,41 @@ def save_checkpoint(run_dir: Path, ckpt: Checkpoint) -> Path:
     tmp = root / f".tmp_step_{ckpt.step:09d}"
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
-    (tmp / "agent.msgpack").write_bytes(flax.serialization.to_bytes(ckpt.agent_state))
+    try:
+        _write_files(run_dir, tmp, ckpt)
+    except OSError:  # a full disk: the error names the file; the partial copy frees its space
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    # Its files on the disk (``_write_files`` flushes them) before the rename, and the rename
+    # before the older checkpoints go: else a power loss could leave the new name with empty
+    # files and no older checkpoint.
+    fault_point("checkpoint_before_rename")
+    os.replace(tmp, final)
+    sync_dir(root)
+    fault_point("checkpoint_before_cleanup")
+    for _, old in checkpoint_steps(run_dir)[:-1]:
+        shutil.rmtree(old, ignore_errors=True)
+    return final
+
+
+def _write_files(run_dir: Path, tmp: Path, ckpt: Checkpoint) -> None:
+    """The checkpoint's files in ``tmp``, flushed to the disk; an OSError names the file."""
+    with naming(tmp / "agent.msgpack"):
+        (tmp / "agent.msgpack").write_bytes(flax.serialization.to_bytes(ckpt.agent_state))
     assert ckpt.buffer is not None, "a checkpoint needs the replay buffer"
-    ckpt.buffer.save(tmp / REPLAY_FILE)
+    with naming(tmp / REPLAY_FILE):
+        ckpt.buffer.save(tmp / REPLAY_FILE)
     if ckpt.random_states:
-        np.savez(tmp / "random_states.npz", *ckpt.random_states)
+        with naming(tmp / "random_states.npz"):
+            np.savez(tmp / "random_states.npz", *ckpt.random_states)
     reward = ckpt.reward_state
     if reward is not None and reward.arrays:
-        np.savez(tmp / REWARD_ARRAYS_FILE, **reward.arrays)
+        with naming(tmp / REWARD_ARRAYS_FILE):
+            np.savez(tmp / REWARD_ARRAYS_FILE, **reward.arrays)
     for name in BEST_FILES:  # see restore_best_policy
         if (Path(run_dir) / name).is_file():
-            _link_or_copy(Path(run_dir) / name, tmp / name)
+            with naming(tmp / name):
+                _link_or_copy(Path(run_dir) / name, tmp / name)
     meta = {
         "schema": CHECKPOINT_SCHEMA,
         "step": ckpt.step,
@@ -99,17 +123,10 @@ def save_checkpoint(run_dir: Path, ckpt: Checkpoint) -> Path:
         "reward_state": None if reward is None else reward.values,
         "refill_until": ckpt.refill_until,
     }
-    (tmp / "state.json").write_text(json.dumps(meta))  # last: see run_dir.CHECKPOINT_FILES
-    # On the disk before the rename, and the rename before the older checkpoints go: else a
-    # power loss could leave the new name with empty files and no older checkpoint.
-    sync_tree(tmp)
-    fault_point("checkpoint_before_rename")
-    os.replace(tmp, final)
-    sync_dir(root)
-    fault_point("checkpoint_before_cleanup")
-    for _, old in checkpoint_steps(run_dir)[:-1]:
-        shutil.rmtree(old, ignore_errors=True)
-    return final
+    with naming(tmp / "state.json"):
+        (tmp / "state.json").write_text(json.dumps(meta))  # last: see run_dir.CHECKPOINT_FILES
+    with naming(tmp):
+        sync_tree(tmp)
 
 
 BEST_FILES = (BEST_POLICY_FILE, BEST_POLICY_INFO)
@@ -137,7 +154,7 @@ def restore_best_policy(run_dir: Path, ckpt_dir: Path | None, best_eval: dict[st
         return
     try:
         best_step = int(json.loads(info_path.read_text(encoding="utf-8"))["step"])
-    except (ValueError, KeyError, TypeError) as err:
+    except (ValueError, KeyError, TypeError, RecursionError) as err:
         raise ValueError(f"{info_path} is not a readable best-policy record ({err})") from None
     if not best_eval:  # no best policy yet at the checkpoint: the files came after it
         for name in BEST_FILES:
@@ -180,7 +197,7 @@ def load_checkpoint(
             values = meta["reward_state"]
         else:
             values = None if meta[_OLD_RNG_KEY] is None else {"rng": meta[_OLD_RNG_KEY]}
-    except (ValueError, KeyError, TypeError, AttributeError) as err:
+    except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as err:
         raise ValueError(f"{state_path} is not a readable checkpoint state ({err})") from None
     agent_state = load_msgpack(agent_template, ckpt / "agent.msgpack", "agent checkpoint")
     buffer = None

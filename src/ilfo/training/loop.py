@@ -27,7 +27,7 @@ import numpy as np
 
 from ilfo.agents import policy_of
 from ilfo.agents.base import OnPolicyBatch
-from ilfo.files import write_json_atomic
+from ilfo.files import write_bytes_atomic, write_json_atomic
 from ilfo.replay import ReplayBuffer
 from ilfo.rewards import RewardOutput
 from ilfo.training.build import (
@@ -640,9 +640,7 @@ class Trainer:
         """The policy alone (actor parameters and observation normaliser), atomically."""
         import flax.serialization
 
-        tmp = self.run_dir / f".{name}.tmp"
-        tmp.write_bytes(flax.serialization.to_bytes(policy_of(self.state)))
-        tmp.replace(self.run_dir / name)
+        write_bytes_atomic(self.run_dir / name, flax.serialization.to_bytes(policy_of(self.state)))
 
 
 def _reward_state(reward: Any) -> Any:

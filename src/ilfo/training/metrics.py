@@ -46,13 +46,16 @@ class MetricsLog:
 
     def write(self, row: dict[str, Any]) -> None:
         """Append one row (keys of ``METRIC_FIELDS``; others are ignored by the CSV)."""
-        if self._tb is None:
-            self._tb = TensorBoardLog(self._tb_dir, purge_step=self._purge_step)
-        self._tb.add_scalars(
-            {k: v for k, v in row.items() if k not in ("step", "episode")}, row["step"]
-        )
+        from ilfo.files import naming
+
+        with naming(self._tb_dir):  # a full disk: the message names where
+            if self._tb is None:
+                self._tb = TensorBoardLog(self._tb_dir, purge_step=self._purge_step)
+            self._tb.add_scalars(
+                {k: v for k, v in row.items() if k not in ("step", "episode")}, row["step"]
+            )
         new = not self.path.exists()
-        with self.path.open("a", newline="") as f:
+        with naming(self.path), self.path.open("a", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=METRIC_FIELDS)
             if new:
                 writer.writeheader()
@@ -62,12 +65,14 @@ class MetricsLog:
         """Write the TensorBoard events logged so far to disk, and flush metrics.csv (closed per
         row) to the disk, so that a checkpoint saved after this survives a power loss with
         every row up to its step (resume never logs them again)."""
-        from ilfo.files import sync_dir
+        from ilfo.files import naming, sync_dir
 
         if self._tb is not None:
-            self._tb.flush()
+            with naming(self._tb_dir):
+                self._tb.flush()
         if self.path.exists():
-            sync_dir(self.path)
+            with naming(self.path):
+                sync_dir(self.path)
 
     def close(self) -> None:
         """Flush and close the events file."""
@@ -120,20 +125,37 @@ class TensorBoardLog:
 def truncate_metrics(path: Path, step: int) -> None:
     """Drop rows logged after the checkpoint: the resumed run writes them again. A row cut
     short by a kill (fewer fields than the header) is dropped too. The file is replaced
-    through a rename, so that a kill here loses nothing."""
+    through a rename, so that a kill here loses nothing; one that is not UTF-8 CSV is a
+    ValueError naming it, and left as it is."""
+    from ilfo.files import naming, temporary_name
+
     if not path.is_file():
         return
-    with path.open(newline="") as f:
-        rows = [r for r in csv.DictReader(f) if None not in r.values()]
-    tmp = path.with_name(f".{path.name}.tmp")
-    with tmp.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=METRIC_FIELDS)
-        writer.writeheader()
-        writer.writerows(r for r in rows if r["step"].isdigit() and int(r["step"]) <= step)
-    os.replace(tmp, path)
+    rows = [r for r in _rows(path) if None not in r.values()]
+    tmp = temporary_name(path)
+    try:
+        with naming(path), tmp.open("w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=METRIC_FIELDS)
+            writer.writeheader()
+            for row in rows:
+                logged = row.get("step") or ""  # a header without one: no row is kept
+                if logged.isdigit() and int(logged) <= step:
+                    writer.writerow(row)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def read_metrics(run_dir: Path) -> list[dict[str, str]]:
-    """The rows of a run's metrics.csv."""
-    with (Path(run_dir) / "metrics.csv").open(newline="") as f:
-        return list(csv.DictReader(f))
+    """The rows of a run's metrics.csv (a ValueError names one that is not UTF-8 CSV)."""
+    return _rows(Path(run_dir) / "metrics.csv")
+
+
+def _rows(path: Path) -> list[dict[str, str]]:
+    try:
+        with path.open(newline="", encoding="utf-8") as f:
+            return list(csv.DictReader(f))
+    except UnicodeDecodeError as err:
+        raise ValueError(f"{path} is not UTF-8 text ({err.reason}): damaged") from None
+    except csv.Error as err:
+        raise ValueError(f"{path} is not a readable metrics file ({err})") from None

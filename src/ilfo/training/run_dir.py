@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ilfo.files import check_new_copy_dir, load_msgpack, read_settings_file
+from ilfo.files import check_new_copy_dir, load_msgpack, read_json, read_settings_file
 
 if TYPE_CHECKING:  # at run time these are imported where used: they import this module
     from ilfo.agents import Policy
@@ -282,7 +282,7 @@ def _best_policy_step(run_dir: Path) -> int | None:
         return None
     try:
         return int(json.loads(path.read_text(encoding="utf-8"))["step"])
-    except (ValueError, KeyError, TypeError):
+    except (ValueError, KeyError, TypeError, RecursionError):
         return None
 
 
@@ -331,12 +331,7 @@ def read_demos_record(run_dir: str | Path) -> dict[str, Any] | None:
 
 
 def _read_json_object(path: Path) -> dict[str, Any]:
-    try:
-        raw = json.loads(path.read_text(encoding="utf-8"))
-    except UnicodeDecodeError as err:
-        raise ValueError(f"{path} is not UTF-8 text ({err.reason} at byte {err.start})") from None
-    except json.JSONDecodeError as err:
-        raise ValueError(f"{path} is not valid JSON ({err}); it may be truncated") from None
+    raw = read_json(path)  # a ValueError naming a file not UTF-8, not JSON or nested too deeply
     if not isinstance(raw, dict):
         raise ValueError(f"{path} must hold a JSON object, not {type(raw).__name__}")
     return raw
