@@ -15,14 +15,6 @@ from numpy.typing import ArrayLike
 from ilfo.replay import ReplayData, sample_batch
 
 
-def check_discount_and_polyak(gamma: float, tau: float) -> None:
-    """ValueError unless the discount ``gamma`` and the target networks' Polyak rate ``tau``
-    are in (0, 1] (values outside train without an error and diverge)."""
-    for name, value in (("gamma", gamma), ("tau", tau)):
-        if not 0.0 < value <= 1.0:
-            raise ValueError(f"{name} must be in (0, 1], got {value}")
-
-
 @flax.struct.dataclass
 class Policy:
     """What acting needs of an agent state (a pytree): the actor and the observation normaliser.

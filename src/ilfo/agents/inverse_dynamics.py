@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import optax
 
 from ilfo.agents.networks import MLP, Activation, InitName
+from ilfo.ranges import check_fields, learning_rate, non_negative, widths
 
 __all__ = [
     "InverseDynamics",
@@ -61,21 +62,19 @@ def update_moments(moments: RunningMoments, x: jax.Array) -> RunningMoments:
 class InverseDynamicsConfig:
     """The inverse dynamics model. Defaults: the OPOLO authors' code."""
 
-    hidden: tuple[int, ...] = (256, 256)
+    hidden: tuple[int, ...] = widths((256, 256))
     """Hidden layer widths."""
     activation: Activation = "tanh"
     """Hidden activation."""
     init_scheme: InitName = "glorot"
     """Initialisation (see ``ilfo.agents.networks``)."""
-    lr: float = 3e-4
+    lr: float = learning_rate(3e-4)
     """Adam learning rate."""
-    l2: float = 1e-3
+    l2: float = non_negative(1e-3)
     """Weight of half the sum of squared parameters in the loss."""
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "hidden", tuple(self.hidden))
-        if self.lr <= 0 or self.l2 < 0:
-            raise ValueError("lr must be positive and l2 >= 0")
+        check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
 
 
 @flax.struct.dataclass

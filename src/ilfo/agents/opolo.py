@@ -39,7 +39,6 @@ from numpy.typing import ArrayLike
 from ilfo.agents._common import (
     Policy,
     as_float_bound,
-    check_discount_and_polyak,
     make_normalizer_setter,
 )
 from ilfo.agents.inverse_dynamics import (
@@ -49,6 +48,15 @@ from ilfo.agents.inverse_dynamics import (
 )
 from ilfo.agents.networks import CriticEnsemble, DeterministicActor, InitName
 from ilfo.agents.td3 import delayed, delayed_updates
+from ilfo.ranges import (
+    batch,
+    check_fields,
+    count,
+    fraction,
+    learning_rate,
+    non_negative,
+    widths,
+)
 from ilfo.replay import ReplayData, sample_batch
 from ilfo.rewards.learned import RewardSchedule, env_observations, reward_steps
 
@@ -63,53 +71,44 @@ class OPOLOConfig:
     HalfCheetah, Walker2d and Ant; for Hopper the authors use lr 1e-4, alpha 0.01 and
     pi_reg_coef 0.01: ``OPOLOConfig.hopper()``)."""
 
-    actor_hidden: tuple[int, ...] = (400, 300)
+    actor_hidden: tuple[int, ...] = widths((400, 300))
     """Hidden layer widths of the actor MLP (ReLU)."""
-    critic_hidden: tuple[int, ...] = (400, 300)
+    critic_hidden: tuple[int, ...] = widths((400, 300))
     """Hidden layer widths of each of the twin critics (ReLU)."""
-    batch_size: int = 100
+    batch_size: int = batch(100)
     """Replay transitions, and expert transitions, per update."""
-    gamma: float = 0.99
+    gamma: float = fraction(0.99)
     """Discount factor."""
-    tau: float = 0.005
+    tau: float = fraction(0.005)
     """Polyak rate of the critics' targets."""
-    lr: float = 3e-4
+    lr: float = learning_rate(3e-4)
     """Adam learning rate of the actor and the critics."""
-    exploration_noise: float = 0.1
+    exploration_noise: float = non_negative(0.1)
     """Std of the Gaussian noise added to actions when acting, in units of max_action."""
-    policy_delay: int = 2
+    policy_delay: int = count(2)
     """One actor and target update every policy_delay critic updates."""
-    alpha: float = 0.1
+    alpha: float = non_negative(0.1)
     """Weight of the DICE term: J0 = 2 alpha (1 - gamma) E[min_i Q_i(s, pi(s))]."""
-    pi_reg_coef: float = 0.1
+    pi_reg_coef: float = non_negative(0.1)
     """Weight of the inverse-dynamics regulariser E[(IDM(s_E, s_E') - pi(s_E))^2] of the
     actor loss; 0 turns it off (the authors' "OPOLO-x")."""
     init_scheme: InitName = "glorot"
     """Initialisation of actor and critics (TensorFlow's default, the authors')."""
-    idm_hidden: tuple[int, ...] = (256, 256)
+    idm_hidden: tuple[int, ...] = widths((256, 256))
     """Hidden layer widths of the inverse dynamics model (tanh)."""
-    idm_lr: float = 3e-4
+    idm_lr: float = learning_rate(3e-4)
     """Adam learning rate of the inverse dynamics model."""
-    idm_l2: float = 1e-3
+    idm_l2: float = non_negative(1e-3)
     """L2 weight of the inverse dynamics model's parameters."""
-    idm_pretrain_steps: int = 2500
+    idm_pretrain_steps: int = count(2500, low=0)
     """Gradient steps of the inverse dynamics model before the first update."""
-    idm_every: int = 500
+    idm_every: int = count(500)
     """The inverse dynamics model takes ``idm_steps`` steps every this many updates."""
-    idm_steps: int = 50
+    idm_steps: int = count(50, low=0)
     """See ``idm_every``."""
 
     def __post_init__(self) -> None:
-        for name in ("actor_hidden", "critic_hidden", "idm_hidden"):
-            object.__setattr__(self, name, tuple(getattr(self, name)))
-        for name in ("batch_size", "policy_delay", "idm_every"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if self.idm_pretrain_steps < 0 or self.idm_steps < 0:
-            raise ValueError("idm_pretrain_steps and idm_steps must be >= 0")
-        if self.alpha < 0 or self.pi_reg_coef < 0 or self.lr <= 0:
-            raise ValueError("alpha and pi_reg_coef must be >= 0, lr positive")
-        check_discount_and_polyak(self.gamma, self.tau)
+        check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
 
     @classmethod
     def hopper(cls, **overrides: Any) -> OPOLOConfig:

@@ -27,7 +27,6 @@ from numpy.typing import ArrayLike
 from ilfo.agents._common import (
     Policy,
     as_float_bound,
-    check_discount_and_polyak,
     make_normalizer_setter,
     make_optimizer,
     scan_updates,
@@ -38,6 +37,7 @@ from ilfo.agents.networks import (
     deterministic_squashed,
     sample_squashed,
 )
+from ilfo.ranges import batch, check_fields, count, fraction, learning_rate, positive, widths
 from ilfo.replay import ReplayData
 
 __all__ = ["SAC", "SACConfig", "SACState", "make_sac"]
@@ -49,34 +49,34 @@ Params = Any
 class SACConfig:
     """Hyperparameters of SAC; defaults from Haarnoja et al. 2018 (v2), Table 1."""
 
-    actor_hidden: tuple[int, ...] = (256, 256)
+    actor_hidden: tuple[int, ...] = widths((256, 256))
     """Hidden layer widths of the actor MLP (ReLU)."""
-    critic_hidden: tuple[int, ...] = (256, 256)
+    critic_hidden: tuple[int, ...] = widths((256, 256))
     """Hidden layer widths of each critic MLP (ReLU)."""
-    num_critics: int = 2
+    num_critics: int = count(2)
     """Number of critics; targets and the actor loss use their minimum."""
-    batch_size: int = 256
+    batch_size: int = batch(256)
     """Transitions per gradient step."""
-    gamma: float = 0.99
+    gamma: float = fraction(0.99)
     """Discount factor."""
-    tau: float = 0.005
+    tau: float = fraction(0.005)
     """Polyak rate of the target critics, updated after every update."""
-    lr_actor: float = 3e-4
+    lr_actor: float = learning_rate(3e-4, zero=True)
     """Adam learning rate of the actor."""
-    lr_critic: float = 3e-4
+    lr_critic: float = learning_rate(3e-4, zero=True)
     """Adam learning rate of the critics."""
-    lr_temperature: float = 3e-4
+    lr_temperature: float = learning_rate(3e-4, zero=True)
     """Adam learning rate of log(temperature)."""
-    init_temperature: float = 1.0
+    init_temperature: float = positive(1.0)
     """Initial entropy temperature alpha."""
     autotune: bool = True
     """Learn the temperature so that the policy entropy tracks ``target_entropy``; False keeps
     ``init_temperature`` fixed."""
     target_entropy: float | None = None
     """Target entropy of the action distribution; None = -action_dim."""
-    critic_grad_clip: float | None = None
+    critic_grad_clip: float | None = positive(None)
     """Clip the critics' global gradient norm to this value; None = no clipping."""
-    reward_scale: float = 1.0
+    reward_scale: float = positive(1.0)
     """Rewards are multiplied by this in the critic's target (Haarnoja et al. 2018a, v1). It sets
     the reward's weight against the entropy bonus: tasks whose per-step rewards are tiny (e.g.
     Minitaur, ~0.01) learn little at 1."""
@@ -89,18 +89,12 @@ class SACConfig:
     2023; SimBa's normalised critics); off in Haarnoja et al.'s SAC."""
 
     def __post_init__(self) -> None:
-        if (
-            self.num_critics < 1
-            or self.batch_size < 1
-            or self.init_temperature <= 0
-            or self.reward_scale <= 0
-        ):
+        check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
+        if not self.log_std_min < self.log_std_max:
             raise ValueError(
-                "num_critics, batch_size, init_temperature and reward_scale must be positive"
+                f"log_std_min must be below log_std_max, got {self.log_std_min} and "
+                f"{self.log_std_max}"
             )
-        check_discount_and_polyak(self.gamma, self.tau)
-        object.__setattr__(self, "actor_hidden", tuple(self.actor_hidden))
-        object.__setattr__(self, "critic_hidden", tuple(self.critic_hidden))
 
 
 @flax.struct.dataclass

@@ -32,13 +32,22 @@ from numpy.typing import ArrayLike
 from ilfo.agents._common import (
     Policy,
     as_float_bound,
-    check_discount_and_polyak,
     make_normalizer_setter,
     make_optimizer,
     scan_update_groups,
     scan_updates,
 )
 from ilfo.agents.networks import CriticEnsemble, DeterministicActor, InitName
+from ilfo.ranges import (
+    batch,
+    check_fields,
+    count,
+    fraction,
+    learning_rate,
+    non_negative,
+    positive,
+    widths,
+)
 from ilfo.replay import ReplayData
 
 __all__ = [
@@ -67,38 +76,38 @@ class TD3Config:
     """Hyperparameters of TD3. The defaults are Fujimoto's reference TD3 (author's repository);
     use ``TD3Config.paper()`` for the OOPS paper's settings and ``TD3Config.fast()`` for CPU."""
 
-    actor_hidden: tuple[int, ...] = (256, 256)
+    actor_hidden: tuple[int, ...] = widths((256, 256))
     """Hidden layer widths of the actor MLP (ReLU)."""
-    critic_hidden: tuple[int, ...] = (256, 256)
+    critic_hidden: tuple[int, ...] = widths((256, 256))
     """Hidden layer widths of each critic MLP (ReLU)."""
-    num_critics: int = 2
+    num_critics: int = count(2)
     """Number of critics; the TD target takes their minimum (clipped double Q). 1 = DDPG."""
-    batch_size: int = 256
+    batch_size: int = batch(256)
     """Transitions per gradient step."""
-    gamma: float = 0.99
+    gamma: float = fraction(0.99)
     """Discount factor."""
-    tau: float = 0.005
+    tau: float = fraction(0.005)
     """Polyak rate of the target networks: target <- tau * online + (1 - tau) * target."""
-    lr_actor: float = 3e-4
+    lr_actor: float = learning_rate(3e-4, zero=True)
     """Adam learning rate of the actor."""
-    lr_critic: float = 3e-4
+    lr_critic: float = learning_rate(3e-4, zero=True)
     """Adam learning rate of the critics."""
-    exploration_noise: float = 0.1
+    exploration_noise: float = non_negative(0.1)
     """Std of the Gaussian noise added to actions when acting, in units of max_action."""
-    target_noise: float = 0.2
+    target_noise: float = non_negative(0.2)
     """Std of the target policy smoothing noise, in units of max_action (0 = off)."""
-    noise_clip: float = 0.5
+    noise_clip: float = non_negative(0.5)
     """Target smoothing noise is clipped to +-noise_clip, in units of max_action."""
-    policy_delay: int = 2
+    policy_delay: int = count(2)
     """One actor and target update every policy_delay critic updates (1 = every update)."""
-    critic_grad_clip: float | None = None
+    critic_grad_clip: float | None = positive(None)
     """Clip the critics' global gradient norm to this value; None = no clipping."""
     loss: LossName = "mse"
     """Critic loss: "mse" (sum over critics of mean squared TD error, as in TD3), "huber"
     (delta 1), or "pal" (prioritised approximation loss, see ``pal_loss``)."""
-    pal_alpha: float = 0.4
+    pal_alpha: float = non_negative(0.4)
     """PAL exponent alpha (priority = |td|^alpha)."""
-    pal_min_priority: float = 1.0
+    pal_min_priority: float = positive(1.0)
     """PAL minimum priority: quadratic region of the loss for |td| < pal_min_priority."""
     time_augmentation: bool = False
     """Observations end with a time feature remaining_steps / max_time. When True, the
@@ -115,7 +124,7 @@ class TD3Config:
     """Network initialisation: "torch" (PyTorch's nn.Linear default, uniform +-1/sqrt(fan_in)
     for weights and biases, as the paper's and Fujimoto's code), "flax" (LeCun normal, zero
     biases) or "glorot" (Glorot uniform, zero biases: TensorFlow's, as the OPOLO code)."""
-    max_time: int = 1000
+    max_time: int = count(1000)
     """Scale of the time feature and the largest time-to-go drawn by augmentation (the horizon);
     set by the trainer to the episode horizon in ``ilfo train``."""
     critic_layer_norm: bool = False
@@ -123,22 +132,7 @@ class TD3Config:
     2023; SimBa's normalised critics); off in the paper's TD3."""
 
     def __post_init__(self) -> None:
-        if self.init_scheme not in ("flax", "torch", "glorot"):
-            raise ValueError(
-                f"init_scheme must be 'flax', 'torch' or 'glorot', got {self.init_scheme!r}"
-            )
-        if self.time_augmentation_scheme not in ("finite_horizon", "next_only"):
-            raise ValueError(
-                "time_augmentation_scheme must be 'finite_horizon' or 'next_only', got "
-                f"{self.time_augmentation_scheme!r}"
-            )
-        if self.loss not in ("pal", "mse", "huber"):
-            raise ValueError(f"loss must be 'pal', 'mse' or 'huber', got {self.loss!r}")
-        if self.num_critics < 1 or self.policy_delay < 1 or self.batch_size < 1:
-            raise ValueError("num_critics, policy_delay and batch_size must be >= 1")
-        check_discount_and_polyak(self.gamma, self.tau)
-        object.__setattr__(self, "actor_hidden", tuple(self.actor_hidden))
-        object.__setattr__(self, "critic_hidden", tuple(self.critic_hidden))
+        check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
 
     @classmethod
     def paper(cls, **overrides: Any) -> TD3Config:

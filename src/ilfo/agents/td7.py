@@ -48,12 +48,21 @@ from numpy.typing import ArrayLike
 from ilfo.agents._common import (
     Policy,
     as_float_bound,
-    check_discount_and_polyak,
     make_normalizer_setter,
     make_optimizer,
 )
 from ilfo.agents.networks import dense
 from ilfo.agents.td3 import TimeAugmentationScheme, augment_time, delayed_updates, pal_loss
+from ilfo.ranges import (
+    batch,
+    check_fields,
+    count,
+    fraction,
+    learning_rate,
+    non_negative,
+    positive,
+    width,
+)
 from ilfo.replay import ReplayData
 
 __all__ = [
@@ -74,44 +83,44 @@ class TD7Config:
     """Hyperparameters of TD7. The defaults are the authors' (sfujim/TD7 ``Hyperparameters``),
     with the PAL loss standing in for LAP's prioritised sampling."""
 
-    zs_dim: int = 256
+    zs_dim: int = width(256)
     """Size of the embeddings zs and zsa."""
-    encoder_hidden: int = 256
+    encoder_hidden: int = width(256)
     """Width of the encoders' two hidden layers (ELU)."""
-    actor_hidden: int = 256
+    actor_hidden: int = width(256)
     """Width of the actor's input projection and its two hidden layers (ReLU)."""
-    critic_hidden: int = 256
+    critic_hidden: int = width(256)
     """Width of each critic's input projection and its two hidden layers (ELU)."""
-    num_critics: int = 2
+    num_critics: int = count(2)
     """Critics; the TD target takes their minimum, the actor maximises their mean."""
-    batch_size: int = 256
+    batch_size: int = batch(256)
     """Transitions per gradient step."""
-    gamma: float = 0.99
+    gamma: float = fraction(0.99)
     """Discount factor."""
-    lr_actor: float = 3e-4
+    lr_actor: float = learning_rate(3e-4)
     """Adam learning rate of the actor."""
-    lr_critic: float = 3e-4
+    lr_critic: float = learning_rate(3e-4)
     """Adam learning rate of the critics."""
-    lr_encoder: float = 3e-4
+    lr_encoder: float = learning_rate(3e-4)
     """Adam learning rate of the encoders."""
-    critic_grad_clip: float | None = None
+    critic_grad_clip: float | None = positive(None)
     """Clip the critics' global gradient norm to this value; None = no clipping (the
     authors')."""
-    exploration_noise: float = 0.1
+    exploration_noise: float = non_negative(0.1)
     """Std of the Gaussian noise added to actions when acting, in units of max_action."""
-    target_noise: float = 0.2
+    target_noise: float = non_negative(0.2)
     """Std of the target policy smoothing noise, in units of max_action."""
-    noise_clip: float = 0.5
+    noise_clip: float = non_negative(0.5)
     """Target smoothing noise is clipped to +-noise_clip, in units of max_action."""
-    policy_delay: int = 2
+    policy_delay: int = count(2)
     """One actor update every policy_delay critic updates."""
-    target_update_every: int = 250
+    target_update_every: int = count(250)
     """Updates between hard copies of the targets and the fixed encoder."""
     value_clipping: bool = True
     """Clip the targets' bootstrapped values to the range of the previous period's targets."""
-    pal_alpha: float = 0.4
+    pal_alpha: float = non_negative(0.4)
     """PAL/LAP exponent alpha (priority = max(|td|, min_priority)^alpha)."""
-    pal_min_priority: float = 1.0
+    pal_min_priority: float = positive(1.0)
     """PAL/LAP minimum priority: the loss is quadratic below it."""
     time_augmentation: bool = True
     """Observations end with a time feature; the critic's samples get random times, as
@@ -120,23 +129,13 @@ class TD7Config:
     time_augmentation_scheme: TimeAugmentationScheme = "finite_horizon"
     """As TD3's (``ilfo.agents.td3.TD3Config.time_augmentation_scheme``); only
     "finite_horizon" is built for TD7."""
-    max_time: int = 1000
+    max_time: int = count(1000)
     """Scale of the time feature (the horizon); set by the trainer in ``ilfo train``."""
 
     def __post_init__(self) -> None:
-        widths = (self.zs_dim, self.encoder_hidden, self.actor_hidden, self.critic_hidden)
-        if min(widths) < 1 or self.num_critics < 1 or self.batch_size < 1:
-            raise ValueError("TD7's widths, num_critics and batch_size must be >= 1")
-        if self.policy_delay < 1 or self.target_update_every < 1:
-            raise ValueError("policy_delay and target_update_every must be >= 1")
+        check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
         if self.time_augmentation_scheme != "finite_horizon":
             raise ValueError("TD7 supports time_augmentation_scheme 'finite_horizon' only")
-        for name in ("lr_actor", "lr_critic", "lr_encoder"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
-        if not (self.exploration_noise >= 0 and self.target_noise >= 0 and self.noise_clip >= 0):
-            raise ValueError("exploration_noise, target_noise and noise_clip must be >= 0")
-        check_discount_and_polyak(self.gamma, 1.0)
 
     @classmethod
     def fast(cls, **overrides: Any) -> TD7Config:

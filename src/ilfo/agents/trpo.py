@@ -63,6 +63,7 @@ from numpy.typing import ArrayLike
 from ilfo.agents._common import Policy, as_float_bound, make_normalizer_setter
 from ilfo.agents.base import OnPolicyBatch
 from ilfo.agents.networks import dense
+from ilfo.ranges import between, check_fields, count, fraction, non_negative, positive, widths
 
 __all__ = [
     "TRPO",
@@ -90,21 +91,21 @@ class TRPOConfig:
     """Hyperparameters of TRPO. Defaults: the SIL authors' code (docs/notes/sil-spec.md, section
     6), except ``kl_check``."""
 
-    hidden: tuple[int, ...] = (128, 128)
+    hidden: tuple[int, ...] = widths((128, 128), min_items=1)
     """Hidden layer widths of the policy-mean MLP and of the value MLP (ReLU, as SIL's code)."""
     log_std_init: float = 0.0
     """Initial log std of the policy, one state-independent parameter per action dimension (not
     clamped while learning)."""
-    max_kl: float = 0.1
+    max_kl: float = positive(0.1)
     """Trust region: the step is scaled so that its quadratic model of the mean KL(old || new)
     is max_kl. SIL's code uses 0.1 (10x the usual 0.01)."""
-    damping: float = 0.1
+    damping: float = non_negative(0.1)
     """Added to the Fisher: the conjugate gradients solve (F + damping I) x = -g."""
-    cg_iters: int = 10
+    cg_iters: int = count(10)
     """Conjugate gradient iterations (fewer if the residual r.r falls below 1e-10)."""
-    line_search_steps: int = 10
+    line_search_steps: int = count(10)
     """Backtracking line search: step fractions 0.5^k for k = 0 .. line_search_steps - 1."""
-    accept_ratio: float = 0.1
+    accept_ratio: float = positive(0.1)
     """A line-search step is accepted when its actual surrogate improvement exceeds this
     fraction of the expected (linear) one."""
     code_fisher: bool = True
@@ -118,48 +119,21 @@ class TRPOConfig:
     """Also reject a line-search step whose mean KL(old || new) exceeds max_kl, so that every
     accepted step keeps to the trust region. SIL's code has no such check (False = the code's);
     ilfo departs from it here."""
-    gamma: float = 0.99
+    gamma: float = fraction(0.99)
     """Discount factor."""
-    gae_lambda: float = 0.97
+    gae_lambda: float = between(0.97, 0.0, 1.0)
     """GAE lambda (SIL's README runs 0.97; its script's default is 0.99)."""
-    value_l2: float = 1e-3
+    value_l2: float = non_negative(1e-3)
     """L2 penalty on all value network parameters, biases included, in the value fit."""
-    value_iters: int = 25
+    value_iters: int = count(25)
     """L-BFGS-B iterations of the full-batch value fit, per learn."""
-    batch_steps: int = 50_000
+    batch_steps: int = count(50_000)
     """An iteration learns once at least this many steps (whole episodes) are collected."""
-    obs_clip: float = 5.0
+    obs_clip: float = positive(5.0)
     """The normalised observation is clipped to +-obs_clip (SIL's ZFilter)."""
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "hidden", tuple(self.hidden))
-        if not self.hidden or any(int(w) != w or w < 1 for w in self.hidden):
-            raise ValueError(f"hidden must be one or more positive widths, got {self.hidden}")
-        positive = {
-            "max_kl": self.max_kl,
-            "cg_iters": self.cg_iters,
-            "line_search_steps": self.line_search_steps,
-            "accept_ratio": self.accept_ratio,
-            "value_iters": self.value_iters,
-            "batch_steps": self.batch_steps,
-            "obs_clip": self.obs_clip,
-        }
-        for name, value in positive.items():
-            if not value > 0 or not math.isfinite(value):
-                raise ValueError(f"{name} must be positive and finite, got {value}")
-        for name in ("cg_iters", "line_search_steps", "value_iters", "batch_steps"):
-            if int(getattr(self, name)) != getattr(self, name):
-                raise ValueError(f"{name} must be an integer, got {getattr(self, name)}")
-        if not 0.0 <= self.damping < math.inf:
-            raise ValueError(f"damping must be >= 0 and finite, got {self.damping}")
-        if not 0.0 <= self.value_l2 < math.inf:
-            raise ValueError(f"value_l2 must be >= 0 and finite, got {self.value_l2}")
-        if not 0.0 < self.gamma <= 1.0:
-            raise ValueError(f"gamma must be in (0, 1], got {self.gamma}")
-        if not 0.0 <= self.gae_lambda <= 1.0:
-            raise ValueError(f"gae_lambda must be in [0, 1], got {self.gae_lambda}")
-        if not math.isfinite(self.log_std_init):
-            raise ValueError(f"log_std_init must be finite, got {self.log_std_init}")
+        check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
 
 
 @flax.struct.dataclass

@@ -16,7 +16,6 @@ from typing import Any, Literal, Protocol
 import numpy as np
 
 from ilfo.ot import OTResult
-from ilfo.ot._checks import check_count
 
 Atoms = Literal["transitions", "states"]
 
@@ -127,23 +126,6 @@ def make_atoms(states: np.ndarray, atoms: Atoms) -> np.ndarray:
     if atoms == "states":
         return states[1:]
     raise ValueError(f"atoms must be 'transitions' or 'states', got {atoms!r}")
-
-
-def check_settings(
-    config: object, counts: Sequence[str] = (), positive: Sequence[str] = ()
-) -> None:
-    """A reward config's checks, run when it is made (not at a run's first episode, after the
-    trainer has written a run directory around it): the fields named in ``counts`` are ints
-    >= 1 or None, those in ``positive`` positive finite numbers."""
-    for name in counts:
-        if getattr(config, name) is not None:
-            check_count(getattr(config, name), name)
-    for name in positive:
-        value = getattr(config, name)
-        if isinstance(value, bool) or not isinstance(value, int | float | np.number):
-            raise ValueError(f"{name} must be a number, got {value!r}")
-        if not 0 < value < np.inf:
-            raise ValueError(f"{name} must be positive and finite, got {value!r}")
 
 
 def check_demos(demos: Sequence[np.ndarray]) -> list[np.ndarray]:

@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import optax
 
 from ilfo.agents.networks import MLP, Activation, InitName
+from ilfo.ranges import batch, check_fields, count, learning_rate, non_negative, positive, widths
 from ilfo.rewards.learned import Transitions
 
 __all__ = ["Discriminator", "DiscriminatorConfig", "DiscriminatorState", "gradient_penalty"]
@@ -37,41 +38,30 @@ class DiscriminatorConfig:
     """The (s, s') discriminator and its training schedule. Defaults: the OPOLO authors' code
     (MuJoCo settings of opolo.yml and td3dacfo.yml)."""
 
-    hidden: tuple[int, ...] = (256, 256)
+    hidden: tuple[int, ...] = widths((256, 256))
     """Hidden layer widths."""
     activation: Activation = "tanh"
     """Hidden activation: "tanh" (the authors') or "relu"."""
     init_scheme: InitName = "glorot"
     """Initialisation: "glorot" (TensorFlow's default, the authors'), "torch" or "flax"."""
-    lr: float = 3e-4
+    lr: float = learning_rate(3e-4)
     """Adam learning rate (the authors use the agent's: 3e-4; 1e-3 for DACfO on Walker2d)."""
-    entropy_coef: float = 1e-3
+    entropy_coef: float = non_negative(1e-3)
     """Weight of the entropy bonus (subtracted from the loss)."""
-    grad_penalty: float = 10.0
+    grad_penalty: float = non_negative(10.0)
     """Weight of the gradient penalty; 0 turns it off."""
-    batch_size: int = 100
+    batch_size: int = batch(100)
     """Expert transitions and learner transitions per step (each)."""
-    update_every: int = 500
+    update_every: int = count(500)
     """Steps of the discriminator are taken every this many agent updates (with one update per
     environment step, the authors' every 500 environment steps)."""
-    updates: int = 10
+    updates: int = count(10)
     """Gradient steps taken each time (the authors' 10)."""
-    std_floor: float = 0.1
+    std_floor: float = positive(0.1)
     """Floor of the input standardisation's std (the authors' sqrt(1e-2))."""
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "hidden", tuple(self.hidden))
-        if self.activation not in ("tanh", "relu"):
-            raise ValueError(f"activation must be 'tanh' or 'relu', got {self.activation!r}")
-        if self.init_scheme not in ("glorot", "torch", "flax"):
-            raise ValueError(f"unknown init_scheme {self.init_scheme!r}")
-        for name in ("batch_size", "update_every", "updates"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if self.lr <= 0 or self.std_floor <= 0:
-            raise ValueError("lr and std_floor must be positive")
-        if self.entropy_coef < 0 or self.grad_penalty < 0:
-            raise ValueError("entropy_coef and grad_penalty must be >= 0")
+        check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
 
 
 @flax.struct.dataclass

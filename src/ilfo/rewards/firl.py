@@ -34,6 +34,16 @@ import jax.numpy as jnp
 import optax
 
 from ilfo.agents.networks import dense
+from ilfo.ranges import (
+    batch,
+    check_fields,
+    count,
+    learning_rate,
+    non_negative,
+    positive,
+    width,
+    widths,
+)
 from ilfo.rewards.learned import Transitions
 
 __all__ = ["FIRL", "FIRLConfig", "FIRLState", "fkl_surrogate"]
@@ -44,49 +54,40 @@ class FIRLConfig:
     """f-IRL (FKL). Defaults: the authors' MuJoCo configs (Hopper, Walker2d, HalfCheetah; Ant
     uses ``reward_hidden=(128, 128)``, ``disc_blocks=6``)."""
 
-    reward_hidden: tuple[int, ...] = (64, 64)
+    reward_hidden: tuple[int, ...] = widths((64, 64), min_items=1)
     """Widths of the reward network: Linear(d, h0), then Linear(h_i, h_i+1) + ReLU for each next
     width, then Linear(., 1) (the code's layout: no activation after the first layer)."""
-    reward_lr: float = 1e-4
+    reward_lr: float = learning_rate(1e-4)
     """Adam learning rate of the reward network."""
-    reward_weight_decay: float = 1e-3
+    reward_weight_decay: float = non_negative(1e-3)
     """L2 weight added to the reward network's gradient (PyTorch Adam's coupled weight decay)."""
-    reward_clip: float = 10.0
+    reward_clip: float = positive(10.0)
     """The reward is clipped to [-reward_clip, reward_clip]."""
-    disc_hidden: int = 128
+    disc_hidden: int = width(128)
     """Width of the discriminator."""
-    disc_blocks: int = 3
+    disc_blocks: int = count(3)
     """Discriminator layout: Linear(d, w), then disc_blocks - 1 residual blocks
     x + tanh(Linear(w, w) x), then Linear(w, 1)."""
-    disc_lr: float = 3e-4
+    disc_lr: float = learning_rate(3e-4)
     """Adam learning rate of the discriminator."""
-    disc_weight_decay: float = 1e-4
+    disc_weight_decay: float = non_negative(1e-4)
     """Coupled L2 weight of the discriminator."""
-    disc_batch_size: int = 800
+    disc_batch_size: int = batch(800)
     """Expert states and agent states per discriminator step (each)."""
-    disc_steps: int = 1200
+    disc_steps: int = count(1200, low=0)
     """Discriminator steps per outer iteration."""
-    disc_clip: float = 10.0
+    disc_clip: float = positive(10.0)
     """The discriminator's logit is clipped to [-disc_clip, disc_clip]."""
-    rollouts: int = 10
+    rollouts: int = count(10)
     """Fresh episodes of the current policy per outer iteration."""
-    expert_resample: int = 10
+    expert_resample: int = count(10, low=0)
     """Expert trajectories drawn into the covariance each iteration (with replacement when more
     than the demos); 0: the agent's rollouts alone (the theorem's estimator)."""
-    iteration_steps: int = 5000
+    iteration_steps: int = count(5000)
     """Environment steps of the agent between reward updates (the code's 5 x 1000)."""
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "reward_hidden", tuple(self.reward_hidden))
-        if not self.reward_hidden:
-            raise ValueError("reward_hidden needs at least one width")
-        for name in ("disc_hidden", "disc_blocks", "disc_batch_size", "rollouts"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if self.iteration_steps < 1 or self.disc_steps < 0 or self.expert_resample < 0:
-            raise ValueError("iteration_steps must be >= 1; disc_steps, expert_resample >= 0")
-        if min(self.reward_lr, self.disc_lr, self.reward_clip, self.disc_clip) <= 0:
-            raise ValueError("learning rates and clips must be positive")
+        check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
 
 
 class RewardNet(nn.Module):
@@ -98,8 +99,8 @@ class RewardNet(nn.Module):
     @nn.compact
     def __call__(self, x: jax.Array) -> jax.Array:
         x = dense(self.hidden[0], x.shape[-1], "torch")(x)
-        for width in self.hidden[1:]:
-            x = nn.relu(dense(width, x.shape[-1], "torch")(x))
+        for features in self.hidden[1:]:
+            x = nn.relu(dense(features, x.shape[-1], "torch")(x))
         return jnp.clip(dense(1, x.shape[-1], "torch")(x)[..., 0], -self.clip, self.clip)
 
 

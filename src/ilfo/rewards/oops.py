@@ -14,7 +14,9 @@ from typing import Literal
 
 import numpy as np
 
-from ilfo.ot import METRICS, SOLVERS, Metric, OTResult, Solver, cost_matrix, solve
+from ilfo.ot import METRICS, Metric, OTResult, Solver, cost_matrix, solve
+from ilfo.ot._checks import check_count
+from ilfo.ranges import check_fields, count, positive, rng_seed
 from ilfo.rewards.base import (
     Atoms,
     RewardOutput,
@@ -22,7 +24,6 @@ from ilfo.rewards.base import (
     Standardizer,
     check_demos,
     check_episode,
-    check_settings,
     make_atoms,
 )
 
@@ -42,14 +43,14 @@ class OOPSConfig:
     solver: Solver = "sinkhorn"
     """Coupling: ``sinkhorn`` (entropic OT), ``emd`` (exact network simplex) or ``greedy``
     (PWIL's greedy coupling)."""
-    reg: float = 0.05
+    reg: float = positive(0.05)
     """Sinkhorn's absolute entropic regularisation lambda."""
-    tol: float = 1e-9
+    tol: float = positive(1e-9)
     """Sinkhorn stops when the L1 error of both marginals is below this times the mass (1:
     OOPS's weights are uniform)."""
-    max_iter: int = 20000
+    max_iter: int = count(20000, check=check_count)
     """Most Sinkhorn iterations (the paper's code always ran 20,000, in float32)."""
-    reward_scale: float = 5.0
+    reward_scale: float = positive(5.0)
     """r_t = -reward_scale * T / sqrt(obs_dim) * sum_j C_tj P_tj, T the learner's number of
     transitions (1,000 in the paper's fixed-horizon episodes)."""
     demo_selection: DemoSelection = "random"
@@ -71,21 +72,13 @@ class OOPSConfig:
     """Multiply the cost of atom i of n (learner) and j of m (expert) by 1 + |i/n - j/m|,
     penalising matches far apart in time (the authors' ``use_tcot``; off in the paper's
     runs). With ``demo_selection='pooled'`` j/m is the position within the atom's own demo."""
-    seed: int = 0
+    seed: int = rng_seed()
     """Seed of the generator that draws the demo with ``demo_selection='random'``."""
 
     def __post_init__(self) -> None:
-        if self.atoms not in ("transitions", "states"):
-            raise ValueError(f"atoms must be 'transitions' or 'states', got {self.atoms!r}")
         if self.metric not in METRICS:
             raise ValueError(f"unknown metric {self.metric!r}; choose one of {', '.join(METRICS)}")
-        if self.solver not in SOLVERS:
-            raise ValueError(f"solver must be sinkhorn, emd or greedy, got {self.solver!r}")
-        if self.demo_selection not in ("random", "pooled", "nearest"):
-            raise ValueError(
-                f"demo_selection must be random, pooled or nearest, got {self.demo_selection!r}"
-            )
-        check_settings(self, counts=("max_iter",), positive=("reg", "tol", "reward_scale"))
+        check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
 
 
 def _positions(count: int) -> np.ndarray:

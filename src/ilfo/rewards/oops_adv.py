@@ -26,6 +26,8 @@ import jax
 import numpy as np
 
 from ilfo.ot import OTResult, sinkhorn
+from ilfo.ot._checks import check_count
+from ilfo.ranges import check_fields, count, learning_rate, positive, rng_seed, width, widths
 from ilfo.rewards.adversarial import (
     AdversarialCritic,
     critic_arrays,
@@ -38,7 +40,6 @@ from ilfo.rewards.base import (
     Standardizer,
     check_demos,
     check_episode,
-    check_settings,
     make_atoms,
 )
 
@@ -51,37 +52,30 @@ class AdversarialOOPSConfig:
     schedule: the critic is SIL's, and its schedule (one step every ``critic_every`` episodes)
     is ilfo's choice (docs/notes/sil-spec.md, section 8)."""
 
-    critic_hidden: tuple[int, ...] = (128, 128)
+    critic_hidden: tuple[int, ...] = widths((128, 128))
     """Hidden layer widths (ReLU) of the critic (SIL's)."""
-    critic_features: int = 30
+    critic_features: int = width(30)
     """Output features of the critic (SIL's): the space of the cosine cost."""
-    critic_lr: float = 5e-4
+    critic_lr: float = learning_rate(5e-4)
     """Adam learning rate of the critic (SIL's; the paper gives none for OOPS_adv)."""
-    reg: float = 0.05
+    reg: float = positive(0.05)
     """Sinkhorn's absolute entropic regularisation lambda: OOPS's (the paper's appendix); SIL's
     0.01 is the alternative (the paper does not say which OOPS_adv used)."""
-    tol: float = 1e-9
+    tol: float = positive(1e-9)
     """Sinkhorn stops when the L1 error of both marginals is below this."""
-    max_iter: int = 20000
+    max_iter: int = count(20000, check=check_count)
     """Most Sinkhorn iterations (OOPS's)."""
-    reward_scale: float = 5.0
+    reward_scale: float = positive(5.0)
     """r_t = -reward_scale * T / sqrt(obs_dim) * sum_j C_tj P_tj, as OOPS."""
-    critic_every: int = 1
+    critic_every: int = count(1)
     """The critic takes one Adam step on the last ``critic_every`` episodes each time that many
     have been rewarded since its last step (the paper gives no schedule; 1: a step per episode,
     on that episode alone, after its rewards; SIL's is one step per ~50 episodes)."""
-    seed: int = 0
+    seed: int = rng_seed()
     """Seed of the critic's initialisation and of the generator that draws a demo per episode."""
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "critic_hidden", tuple(self.critic_hidden))
-        if any(w < 1 for w in self.critic_hidden):
-            raise ValueError(f"critic_hidden widths must be >= 1, got {self.critic_hidden}")
-        check_settings(
-            self,
-            counts=("critic_features", "max_iter", "critic_every"),
-            positive=("critic_lr", "reg", "tol", "reward_scale"),
-        )
+        check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
 
 
 @dataclass(frozen=True)

@@ -19,13 +19,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ilfo.ot import cost_matrix, greedy
+from ilfo.ranges import check_fields, count, positive, rng_seed
 from ilfo.rewards.base import (
     RewardOutput,
     RewardState,
     Standardizer,
     check_demos,
     check_episode,
-    check_settings,
 )
 
 
@@ -33,27 +33,25 @@ from ilfo.rewards.base import (
 class PWILConfig:
     """PWIL-(s) as the paper ran it."""
 
-    alpha: float = 5.0
+    alpha: float = positive(5.0)
     """Reward amplitude alpha."""
-    beta: float = 5.0
+    beta: float = positive(5.0)
     """Kernel width beta."""
-    horizon: int | None = None
+    horizon: int | None = count(None)
     """Learner mass per step is 1 / horizon (PWIL uses the episode limit, 1,000 in MuJoCo);
     None uses the episode's own length."""
-    subsample: int = 1
+    subsample: int = count(1)
     """Keep every ``subsample``-th state of each demo, from a random offset in [0, subsample)
     drawn per demo (PWIL's code: 20 on MuJoCo, so a 1,000-step demo gives 50 atoms of weight
     1/50); 1 keeps every state."""
-    kernel_dim: int | None = None
+    kernel_dim: int | None = count(None)
     """The d in the kernel's sqrt(d); None: the observations' dimension |S|. PWIL's code uses
     |S| + |A| also in its observation-only mode (23 on Walker2d, 14 on Hopper)."""
-    seed: int = 0
+    seed: int = rng_seed()
     """Draws the subsampling offsets. Set by the trainer: the run's seed."""
 
     def __post_init__(self) -> None:
-        check_settings(
-            self, counts=("horizon", "subsample", "kernel_dim"), positive=("alpha", "beta")
-        )
+        check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
 
 
 class PWIL:

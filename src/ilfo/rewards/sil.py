@@ -38,6 +38,8 @@ import jax
 import numpy as np
 
 from ilfo.ot import OTResult, sinkhorn
+from ilfo.ot._checks import check_count
+from ilfo.ranges import check_fields, count, learning_rate, positive, rng_seed, width, widths
 from ilfo.rewards.adversarial import (
     AdversarialCritic,
     critic_arrays,
@@ -50,7 +52,6 @@ from ilfo.rewards.base import (
     Standardizer,
     check_demos,
     check_episode,
-    check_settings,
     make_atoms,
 )
 
@@ -68,43 +69,33 @@ _FILTER_EPS = 1e-8
 class SILConfig:
     """SIL-(s,s')'s reward and its critic. Defaults: the SIL authors' code and README command."""
 
-    critic_hidden: tuple[int, ...] = (128, 128)
+    critic_hidden: tuple[int, ...] = widths((128, 128))
     """Hidden layer widths (ReLU) of the adversarial critic."""
-    critic_features: int = 30
+    critic_features: int = width(30)
     """Output features of the critic (a linear layer): the space of the cosine cost."""
-    critic_lr: float = 5e-4
+    critic_lr: float = learning_rate(5e-4)
     """Adam learning rate of the critic (one step per batch, in ``end_batch``)."""
-    reg: float = 0.01
+    reg: float = positive(0.01)
     """Sinkhorn's absolute entropic regularisation lambda (the cosine cost lies in [0, 2])."""
-    tol: float = 1e-9
+    tol: float = positive(1e-9)
     """Sinkhorn stops when the L1 error of both marginals is below this."""
-    max_iter: int = 100_000
+    max_iter: int = count(100_000, check=check_count)
     """Most Sinkhorn iterations (the authors' cap, 1e9, means "to convergence"; at lambda 0.01
     a 1000 x 50 problem takes from a few to ~1,500 iterations)."""
-    expert_subsample: int = 20
+    expert_subsample: int = count(20)
     """Expert atoms are every this many steps of the drawn demo, from a random phase in
     [0, expert_subsample) drawn per learner episode (the authors' data: 50 atoms from 1,000
     steps); 1 keeps every step."""
-    reward_clip: float = 10.0
+    reward_clip: float = positive(10.0, inf=True, note="inf: no clipping")
     """Rewards divided by their running std are clipped to [-reward_clip, reward_clip]."""
-    obs_clip: float = 5.0
+    obs_clip: float = positive(5.0, inf=True, note="inf: no clipping")
     """Normalised observations are clipped to [-obs_clip, obs_clip]."""
-    seed: int = 0
+    seed: int = rng_seed()
     """Seed of the critic's initialisation and of the generator of the expert draws (demo and
     phase)."""
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "critic_hidden", tuple(self.critic_hidden))
-        if any(w < 1 for w in self.critic_hidden):
-            raise ValueError(f"critic_hidden widths must be >= 1, got {self.critic_hidden}")
-        check_settings(
-            self,
-            counts=("critic_features", "max_iter", "expert_subsample"),
-            positive=("critic_lr", "reg", "tol"),
-        )
-        for name in ("reward_clip", "obs_clip"):  # inf: no clipping
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be positive, got {getattr(self, name)!r}")
+        check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
 
 
 class RunningStd:

@@ -29,6 +29,7 @@ from ilfo.paths import DATA_DIR
 from ilfo.rewards import OOPS, EpisodeReward, expert_transitions
 from ilfo.training.config import TrainConfig
 from ilfo.training.learned import LearnedRewardSetup
+from ilfo.training.resources import check_memory
 
 
 class Agent(NamedTuple):
@@ -79,16 +80,27 @@ def make_envs(config: TrainConfig) -> tuple[gym.Env, gym.Env, EnvInfo]:
     """The run's training environment (fixed-horizon or standard, as configured), its
     evaluation environment (always fixed-horizon, the paper's score) and their ``EnvInfo``."""
     env = make_run_env(config, config.uses_fixed_horizon)
-    eval_env = make_run_env(config, True, horizon=int(env.spec.max_episode_steps))
-    return env, eval_env, env_info(env, config.env)
+    info = env_info(env, config.env)
+    # Before anything is allocated: a replay buffer or networks past the machine's memory.
+    check_memory(config, info.obs_dim, info.action_dim, info.horizon)
+    eval_env = make_run_env(config, True, horizon=info.horizon)
+    return env, eval_env, info
 
 
 def env_info(env: gym.Env, env_id: str) -> EnvInfo:
-    """``EnvInfo`` of ``env``; a ValueError where actions are not a symmetric box [-a, a]."""
-    act_space = env.action_space
+    """``EnvInfo`` of ``env``; a ValueError where observations are not a flat box of numbers
+    or actions not a finite symmetric box [-a, a] (ilfo's agents act continuously)."""
+    act_space, obs_space = env.action_space, env.observation_space
+    for what, space in (("action", act_space), ("observation", obs_space)):
+        if not isinstance(space, gym.spaces.Box):
+            raise ValueError(
+                f"{env_id} has a {type(space).__name__} {what} space ({space}): ilfo's agents "
+                f"need a gymnasium Box of {what}s (continuous control, e.g. Hopper-v5)"
+            )
     high = np.asarray(act_space.high)
-    if not np.allclose(high, -np.asarray(act_space.low)) or not np.allclose(high, high.flat[0]):
-        raise ValueError(f"{env_id}: actions must lie in a symmetric box [-a, a]")
+    symmetric = np.allclose(high, -np.asarray(act_space.low)) and np.allclose(high, high.flat[0])
+    if not symmetric or not np.all(np.isfinite(high)):
+        raise ValueError(f"{env_id}: actions must lie in a finite symmetric box [-a, a]")
     return EnvInfo(
         horizon=int(env.spec.max_episode_steps),
         obs_dim=int(np.prod(env.observation_space.shape)),

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -15,9 +14,18 @@ from ilfo.agents import SACConfig, TD3Config
 from ilfo.agents.opolo import OPOLOConfig
 from ilfo.agents.td7 import TD7Config
 from ilfo.agents.trpo import TRPOConfig
-from ilfo.algos import AGENT_PARTS, ALGOS, PART_CONFIGS, Recipe, algos_using, recipe
-from ilfo.config import dataclass_from_dict
+from ilfo.algos import (
+    AGENT_PARTS,
+    ALGOS,
+    PART_CONFIGS,
+    REWARD_PARTS,
+    Recipe,
+    algos_using,
+    recipe,
+)
+from ilfo.config import dataclass_from_dict, flag_name
 from ilfo.envs.make import CONTACT_FORCE_DIMS
+from ilfo.ranges import SettingError, check_fields, count, non_negative, rng_seed
 from ilfo.rewards import DiscriminatorConfig, FIRLConfig, OOPSConfig, PWILConfig
 from ilfo.rewards.oops_adv import AdversarialOOPSConfig
 from ilfo.rewards.sil import SILConfig
@@ -45,6 +53,14 @@ def check_eval_episodes(episodes: int, setting: str) -> None:
         )
 
 
+def part_flag(part: str, setting: str) -> str | None:
+    """The ``ilfo train`` flag of field ``setting`` of part ``part`` (``--td3-batch-size``);
+    None for the fields the trainer sets (no flag)."""
+    if setting in {**AGENT_PARTS, **REWARD_PARTS}[part].set_by_trainer:
+        return None
+    return flag_name(setting, part)
+
+
 Algo = Literal[tuple(ALGOS)]  # type: ignore[valid-type]
 """The names of ``ilfo.algos.ALGOS``, made from the registry (the CLI's ``--algo`` choices)."""
 
@@ -61,15 +77,15 @@ class TrainConfig:
     demos: str | None = None
     """Demonstration file (.npz); omit it (None) for the env's shipped expert demos
     (data/experts/<env>/demos.npz)."""
-    num_demos: int = 1
+    num_demos: int = count(1)
     """How many of the file's demos to imitate (the first N)."""
-    steps: int = 1_000_000
+    steps: int = count(1_000_000)
     """Environment steps in total (random ones included)."""
-    start_steps: int | None = None
+    start_steps: int | None = count(None, low=0)
     """Uniformly random steps before the policy acts (off-policy agents only: TRPO acts from
     the first step); None: the algo's (``Recipe.start_steps``: firl-fkl 1,000, as its authors'
     code), else ``DEFAULT_START_STEPS`` (10,000, the paper's)."""
-    updates_per_step: int = 1
+    updates_per_step: int = count(1)
     """Agent updates per environment step collected (the update-to-data ratio), run after each
     episode; 1 is the paper's. More spends compute to learn more from the same data. Off-policy
     agents only: other than 1 is an error for TRPO (sil), which learns once per batch
@@ -78,13 +94,13 @@ class TrainConfig:
     """Agent sizes: for TD3/DDPG paper (critics 1024-1024) or fast (critics 256-256); for TD7
     paper (the authors': widths 256, batch 256) or fast (widths 128, batch 100); the part's
     flags (--td3-*, --td7-*) change single settings."""
-    seed: int = 0
+    seed: int = rng_seed()
     """Seed of everything: environment, exploration, networks, demo draws."""
     fixed_horizon: bool | None = None
     """Run every episode to the full horizon, ignoring termination (the paper); None: on for
     imitation (except sil and firl-fkl, off as their authors' code, and pwil-td3, off as
     measured: docs/results.md), off for true-reward algos."""
-    horizon: int | None = None
+    horizon: int | None = count(None, note="none: the env's own")
     """Episode length; None: the environment's limit (1,000 for MuJoCo)."""
     healthy_angle_range: tuple[float, float] | None = None
     """Torso angle range (radians) outside which Hopper or Walker2d counts as fallen, in this
@@ -98,21 +114,21 @@ class TrainConfig:
     unfilled; on Humanoid they are 98% of OOPS's distance once the learner has fallen,
     docs/benchmarks.md), on for the task reward (``ilfo expert train``'s experts observe them).
     Other envs have none to drop."""
-    eval_every: int = 5_000
+    eval_every: int = count(5_000)
     """Evaluate every this many environment steps."""
-    eval_episodes: int = 10
+    eval_episodes: int = count(10, high=MAX_EVAL_EPISODES, check=check_eval_episodes)
     """Deterministic episodes per evaluation (at most ``MAX_EVAL_EPISODES``, 10,000)."""
     best_by: Literal["score", "return"] = "score"
     """Which evaluation picks best_policy.msgpack: ``score`` (the paper's fixed-horizon score)
     or ``return`` (the standard return, which stops at the first fall: what an expert is judged
     by; ``ilfo expert train`` uses it)."""
-    checkpoint_every: int = 50_000
+    checkpoint_every: int = count(50_000)
     """Checkpoint every this many environment steps (and on Ctrl-C, and at the end)."""
-    checkpoint_minutes: float = 10.0
+    checkpoint_minutes: float = non_negative(10.0, note="0: off")
     """Also checkpoint when this many minutes of wall-clock time have passed since the last
     checkpoint (or the start), so that a crash loses at most that much of any run, short runs
     included; 0 turns the clock off (steps only)."""
-    replay_capacity: int = 1_000_000
+    replay_capacity: int = count(1_000_000)
     """Replay buffer size in transitions (off-policy agents; TRPO keeps only its batch)."""
     out: str = "runs"
     """Parent directory of the run directory."""
@@ -152,7 +168,11 @@ class TrainConfig:
     def __post_init__(self) -> None:
         algo = recipe(self.algo)
         for name, cls in PART_CONFIGS.items():  # dicts, as read back from config.json
-            object.__setattr__(self, name, dataclass_from_dict(cls, getattr(self, name), name))
+            try:
+                part = dataclass_from_dict(cls, getattr(self, name), name)
+            except SettingError as err:
+                raise err.within(name, part_flag(name, err.setting)) from None
+            object.__setattr__(self, name, part)
         for name in PART_CONFIGS:
             if getattr(self, name) is not None and name not in (algo.agent, algo.reward):
                 rewarder = f"the {algo.reward.upper()}" if algo.reward else "no"
@@ -162,31 +182,13 @@ class TrainConfig:
                     f"which uses the {algo.agent.upper()} agent and {rewarder} rewarder; "
                     f"{name} is for {', '.join(algos_using(name))}"
                 )
-        if self.preset not in ("paper", "fast"):
-            raise ValueError(f"preset must be 'paper' or 'fast', got {self.preset!r}")
-        if self.best_by not in ("score", "return"):
-            raise ValueError(f"best_by must be 'score' or 'return', got {self.best_by!r}")
-        counts = (
-            "steps",
-            "eval_every",
-            "eval_episodes",
-            "checkpoint_every",
-            "num_demos",
-            "replay_capacity",
-            "updates_per_step",
-        )
-        for name in (*counts, "start_steps", "seed", "horizon"):
-            value = getattr(self, name)
-            # 1e6 or True would pass the range checks and fail far from here, or not at all.
-            if value is None:
-                continue
-            if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-                raise ValueError(f"{name} must be an integer, got {value!r}")
-            object.__setattr__(self, name, int(value))  # numpy integers: JSON needs int
-        for name in counts:
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        check_eval_episodes(self.eval_episodes, "eval_episodes (--eval-episodes)")
+        # Types and ranges, from the fields' declarations (ilfo.ranges), named with their flags.
+        check_fields(self, flags="")
+        if self.demos is not None and not algo.imitation:
+            raise ValueError(
+                f"demos (--demos) do not apply to algo {self.algo!r}: it learns from the task "
+                f"reward, not from demonstrations; leave demos out, or choose an imitation algo"
+            )
         if AGENT_PARTS[algo.agent].on_policy and self.updates_per_step != 1:
             # Ignored, it would make a sweep's updates-per-step comparison silently wrong.
             raise ValueError(
@@ -194,26 +196,11 @@ class TrainConfig:
                 f"{algo.agent.upper()} agent learns once per batch of its own episodes "
                 f"(--{algo.agent}-batch-steps); leave it at 1"
             )
-        if self.start_steps is not None and self.start_steps < 0:
-            raise ValueError(f"start_steps must be >= 0, got {self.start_steps}")
-        if self.seed < 0:
-            raise ValueError(f"seed must be >= 0, got {self.seed}")
-        if self.horizon is not None and self.horizon < 1:
-            raise ValueError(f"horizon must be >= 1 (or unset: the env's own), got {self.horizon}")
-        minutes = self.checkpoint_minutes
-        if isinstance(minutes, bool) or not isinstance(minutes, numbers.Real):
-            raise ValueError(f"checkpoint_minutes must be a number, got {minutes!r}")
-        if not (math.isfinite(minutes) and minutes >= 0):
-            raise ValueError(f"checkpoint_minutes must be >= 0 (0: off), got {minutes!r}")
-        object.__setattr__(self, "checkpoint_minutes", float(minutes))
-        if self.healthy_angle_range is not None:  # a list, as read back from config.json
-            angles = tuple(float(v) for v in self.healthy_angle_range)
-            if len(angles) != 2 or not angles[0] < angles[1]:
-                raise ValueError(
-                    f"healthy_angle_range must be (low, high) with low < high, "
-                    f"got {self.healthy_angle_range}"
-                )
-            object.__setattr__(self, "healthy_angle_range", angles)
+        angles = self.healthy_angle_range
+        if angles is not None and not angles[0] < angles[1]:
+            raise ValueError(
+                f"healthy_angle_range must be (low, high) with low < high, got {list(angles)}"
+            )
         if self.contact_forces is False and self.env not in CONTACT_FORCE_DIMS:
             raise ValueError(
                 f"--no-contact-forces applies to {', '.join(CONTACT_FORCE_DIMS)}, not {self.env}"
@@ -364,8 +351,13 @@ def config_from_dict(raw: dict[str, Any], source: str | Path) -> TrainConfig:
     """A ``TrainConfig`` from a record ilfo wrote (config.json, expert.json, a sweep's
     manifest); a ValueError names ``source`` and the setting at fault (an unknown key, a value
     of the wrong type). A record without ``contact_forces`` predates the setting, when every
-    run observed them: it reads back as True."""
-    return _checked_config({"contact_forces": True, **raw}, source)
+    run observed them: it reads back as True. A task-reward run's record with ``demos``
+    predates their refusal, when they were ignored: it reads back without them."""
+    raw = {"contact_forces": True, **raw}
+    algo = raw.get("algo")
+    if isinstance(algo, str) and algo in ALGOS and not ALGOS[algo].imitation:
+        raw["demos"] = None
+    return _checked_config(raw, source)
 
 
 def _checked_config(raw: Mapping[str, Any], source: str | Path) -> TrainConfig:
@@ -403,6 +395,10 @@ def config_from_settings(settings: Mapping[str, Any], source: str | Path) -> Tra
         values = {k: tuple(v) if isinstance(v, list) else v for k, v in given.items()}
         try:
             changed[name] = dataclasses.replace(config.part_config(name), **values)
+        except SettingError as err:
+            raise ValueError(
+                f"{source}: {err.within(name, part_flag(name, err.setting))}"
+            ) from None
         except (TypeError, ValueError) as err:
             raise ValueError(f"{source}: {name}: {err}") from None
     try:
