@@ -21,20 +21,10 @@ from ilfo.evaluate import evaluate_run
 from ilfo.paths import bundled_demos
 from ilfo.rewards import OOPS, OOPSConfig
 from ilfo.training import TrainConfig, Trainer, default_demos_path, load_demo_set, make_reward
+from tiny_run import TINY_RUN
 
-DEMOS = str(bundled_demos("Hopper-v5-scripted"))
-TINY = dict(
-    env="Hopper-v5",
-    demos=DEMOS,
-    horizon=100,
-    start_steps=200,
-    eval_every=200,
-    eval_episodes=1,
-    checkpoint_every=200,
-    preset="fast",
-    replay_capacity=5000,
-    steps=400,
-)
+DEMOS = TINY_RUN["demos"]
+TINY = {**TINY_RUN, "steps": 400}
 FIGURES = ("shares.png", "rewards.png", "calibration.png", "trajectories.png")
 
 

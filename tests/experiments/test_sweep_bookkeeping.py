@@ -19,18 +19,10 @@ import pytest
 from ilfo.cli import main
 from ilfo.experiments import SweepSpec, create_sweep, open_sweep, read_attempts, record_attempt
 from ilfo.experiments.sweep import MANIFEST_FILE
+from tiny_run import TINY_RUN
 
-TINY = {
-    "demos": str(Path(__file__).parents[2] / "data" / "demos" / "Hopper-v5-scripted.npz"),
-    "horizon": 100,
-    "start_steps": 200,
-    "eval_every": 200,
-    "eval_episodes": 1,
-    "checkpoint_every": 200,
-    "preset": "fast",
-    "replay_capacity": 5000,
-    "steps": 400,
-}
+TINY = {**TINY_RUN, "steps": 400}
+del TINY["env"]  # the sweep spec's axis
 HOST = socket.gethostname()
 TWO_CPUS = pytest.mark.skipif(
     not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2,

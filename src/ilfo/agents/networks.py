@@ -36,6 +36,7 @@ __all__ = [
     "DeterministicActor",
     "SquashedGaussianActor",
     "deterministic_squashed",
+    "ensemble",
     "sample_squashed",
 ]
 
@@ -113,6 +114,20 @@ class Critic(nn.Module):
         return MLP(self.hidden, 1, self.init_scheme, layer_norm=self.layer_norm)(x)[..., 0]
 
 
+def ensemble(member: type[nn.Module], size: int) -> type[nn.Module]:
+    """``size`` independent copies of the module ``member`` run as one: their parameters on a
+    leading axis (each copy initialised with its own key), every input shared, the outputs
+    stacked on axis 0 (``nn.vmap``)."""
+    return nn.vmap(
+        member,
+        variable_axes={"params": 0},
+        split_rngs={"params": True},
+        in_axes=None,
+        out_axes=0,
+        axis_size=size,
+    )
+
+
 class CriticEnsemble(nn.Module):
     """``num_critics`` independent critics evaluated at once.
 
@@ -132,15 +147,8 @@ class CriticEnsemble(nn.Module):
 
     @nn.compact
     def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
-        ensemble = nn.vmap(
-            Critic,
-            variable_axes={"params": 0},
-            split_rngs={"params": True},
-            in_axes=None,
-            out_axes=0,
-            axis_size=self.num_critics,
-        )
-        critic = ensemble(self.hidden, self.init_scheme, self.layer_norm, name="ensemble")
+        members = ensemble(Critic, self.num_critics)
+        critic = members(self.hidden, self.init_scheme, self.layer_norm, name="ensemble")
         return critic(obs, action)
 
 

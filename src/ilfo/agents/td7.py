@@ -51,7 +51,7 @@ from ilfo.agents._common import (
     make_normalizer_setter,
     make_optimizer,
 )
-from ilfo.agents.networks import dense
+from ilfo.agents.networks import dense, ensemble
 from ilfo.agents.td3 import TimeAugmentationScheme, augment_time, delayed_updates, pal_loss
 from ilfo.ranges import (
     batch,
@@ -228,15 +228,8 @@ class CriticEnsemble(nn.Module):
 
     @nn.compact
     def __call__(self, obs: jax.Array, action: jax.Array, zsa: jax.Array, zs: jax.Array):
-        ensemble = nn.vmap(
-            _Critic,
-            variable_axes={"params": 0},
-            split_rngs={"params": True},
-            in_axes=None,
-            out_axes=0,
-            axis_size=self.num_critics,
-        )
-        return ensemble(self.hidden, name="ensemble")(obs, action, zsa, zs)
+        members = ensemble(_Critic, self.num_critics)
+        return members(self.hidden, name="ensemble")(obs, action, zsa, zs)
 
 
 @flax.struct.dataclass
