@@ -84,6 +84,14 @@ def test_variants_merge_into_the_parts():
     assert runs["states"].config["oops"]["atoms"] == "states"
 
 
+def test_the_demos_apply_to_the_imitation_algos_of_a_sweep():
+    # The true-reward algos refuse a demo file; a sweep comparing OOPS with its control keeps
+    # one base config, as it does for the parts that only some of its algos use.
+    runs = {r.config["algo"]: r for r in expand(SweepSpec(algo=("oops-td3", "td3"), config=TINY))}
+    assert runs["oops-td3"].config["demos"] == TINY["demos"]
+    assert runs["td3"].config["demos"] is None
+
+
 def test_dropping_contact_forces_applies_to_the_envs_that_observe_them():
     spec = SweepSpec(env=("Hopper-v5", "Humanoid-v5"), config={**TINY, "contact_forces": False})
     spec = dataclasses.replace(spec, config={k: v for k, v in spec.config.items() if k != "demos"})

@@ -220,6 +220,8 @@ def expand(spec: SweepSpec) -> list[SweepRun]:
                         # Likewise dropping the contact forces, where the env observes them.
                         if env not in CONTACT_FORCE_DIMS:
                             settings.pop("contact_forces", None)
+                        if not recipe(algo).imitation:  # and the demos, for the task reward
+                            settings.pop("demos", None)
                         settings.update(env=env, algo=algo, num_demos=num_demos, seed=seed)
                         config = config_from_settings(settings, f"sweep run {name}")
                         runs.append(SweepRun(name, _config_record(config), variant))
