@@ -74,6 +74,11 @@ class LabelConfig:
             raise ValueError(
                 f"squashing must be oops, linear or exponential, got {self.squashing!r}"
             )
+        if self.oops.kernel != "linear":
+            raise ValueError(
+                "the labeller turns costs into rewards by its squashing (squashing, alpha, beta),"
+                f" not by oops.kernel; leave oops.kernel linear, got {self.oops.kernel!r}"
+            )
         if isinstance(self.top_k, bool) or not isinstance(self.top_k, int) or self.top_k < 1:
             raise ValueError(f"top_k must be an integer >= 1, got {self.top_k!r}")
         for name in ("alpha", "beta"):  # <= 0 would reward the episodes far from the demos

@@ -265,3 +265,8 @@ def test_cli_and_bad_input(tmp_path, capsys):
     assert main(["label", str(junk), "--demos", str(demo_path), "--out", str(tmp_path / "y")]) == 2
     assert main([*args[:4], "--out", str(tmp_path / "z.npz"), "--top-k", "5"]) == 2
     assert "top_k 5 exceeds" in capsys.readouterr().err
+
+
+def test_the_labeller_refuses_an_oops_kernel_it_would_ignore():
+    with pytest.raises(ValueError, match="not by oops.kernel"):
+        LabelConfig(oops=OOPSConfig(kernel="exponential"))

@@ -313,3 +313,32 @@ def test_time_index_tells_a_reversed_walk_from_the_demo():
     timed = OOPS([demo], OOPSConfig(solver="emd", atoms="states", time_index=True))
     assert timed(demo).distance == pytest.approx(0.0, abs=1e-12)
     assert timed(backwards).distance > 3 * plain(backwards).distance
+
+
+def test_exponential_kernel_against_an_independent_computation():
+    """alpha * exp(-beta * T / sqrt(d) * c_t), c_t the cost step t transports at mass 1/T; under
+    exact OT of equal-length uniform measures the plan is scipy's optimal assignment."""
+    from scipy.optimize import linear_sum_assignment
+
+    demo, learner = _episode(length=30, seed=21), _episode(length=30, seed=22)
+    states = demo[:-1]
+    scale = 3 * np.maximum(states.std(axis=0, ddof=1), 0.33) + 1e-8
+
+    def atoms(e):
+        z = (e - states.mean(axis=0)) / scale
+        return np.concatenate([z[:-1], z[1:]], axis=1)
+
+    cost = np.sqrt(np.linalg.norm(atoms(learner)[:, None] - atoms(demo)[None], axis=2))
+    rows, cols = linear_sum_assignment(cost)
+    step_cost = cost[rows, cols] / np.sqrt(demo.shape[1])  # T * (1/T) per sqrt(d)
+    config = OOPSConfig(solver="emd", kernel="exponential", reward_scale=2.0, kernel_rate=3.0)
+    out = OOPS([demo], config)(learner)
+    np.testing.assert_allclose(out.rewards, 2.0 * np.exp(-3.0 * step_cost), rtol=1e-10)
+    linear = OOPS([demo], OOPSConfig(solver="emd", reward_scale=2.0))(learner)
+    np.testing.assert_allclose(linear.rewards, -2.0 * step_cost, rtol=1e-10)
+    assert out.distance == pytest.approx(linear.distance, rel=1e-12)  # the coupling is shared
+
+
+def test_unknown_kernel_is_refused():
+    with pytest.raises(ValueError, match="unknown kernel"):
+        OOPSConfig(kernel="gaussian")

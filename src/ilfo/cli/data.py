@@ -321,7 +321,11 @@ def _add_label_parser(sub: argparse._SubParsersAction) -> None:
     add_dataclass_arguments(p, LabelConfig)  # the oops field, a dataclass, gets its group
     group = p.add_argument_group("the OT problem (OOPS's settings)")
     add_dataclass_arguments(
-        group, OOPSConfig, ("demo_selection", "seed", "warm_start", "reward_scale"), prefix="oops"
+        group,
+        OOPSConfig,
+        # The labeller's own squashing (--squashing, --alpha, --beta) turns costs into rewards.
+        ("demo_selection", "seed", "warm_start", "reward_scale", "kernel", "kernel_rate"),
+        prefix="oops",
     )
     p.set_defaults(run=_run_label)
 

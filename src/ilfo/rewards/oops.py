@@ -28,6 +28,8 @@ from ilfo.rewards.base import (
 )
 
 DemoSelection = Literal["random", "pooled", "nearest"]
+Kernel = Literal["linear", "exponential"]
+KERNELS: tuple[str, ...] = ("linear", "exponential")
 
 
 @dataclass(frozen=True)
@@ -52,7 +54,15 @@ class OOPSConfig:
     """Most Sinkhorn iterations (the paper's code always ran 20,000, in float32)."""
     reward_scale: float = positive(5.0)
     """r_t = -reward_scale * T / sqrt(obs_dim) * sum_j C_tj P_tj, T the learner's number of
-    transitions (1,000 in the paper's fixed-horizon episodes)."""
+    transitions (1,000 in the paper's fixed-horizon episodes); with the exponential kernel, the
+    amplitude alpha."""
+    kernel: Kernel = "linear"
+    """How a step's transported cost becomes its reward: ``linear``, the paper's
+    -reward_scale * T / sqrt(obs_dim) * sum_j C_tj P_tj, or ``exponential``,
+    reward_scale * exp(-kernel_rate * T / sqrt(obs_dim) * sum_j C_tj P_tj), PWIL's and OTR's
+    form, which pays mostly for steps close to some expert atom (not in the paper's runs)."""
+    kernel_rate: float = positive(5.0)
+    """beta of the exponential kernel (PWIL's and OTR's 5); unused by the linear one."""
     demo_selection: DemoSelection = "random"
     """With several demos: ``random`` (one drawn per episode, the paper's code), ``pooled``
     (all demos' atoms together, uniform weights) or ``nearest`` (the demo with the smallest OT
@@ -78,6 +88,8 @@ class OOPSConfig:
     def __post_init__(self) -> None:
         if self.metric not in METRICS:
             raise ValueError(f"unknown metric {self.metric!r}; choose one of {', '.join(METRICS)}")
+        if self.kernel not in KERNELS:
+            raise ValueError(f"unknown kernel {self.kernel!r}; choose one of {', '.join(KERNELS)}")
         check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
 
 
@@ -124,10 +136,14 @@ class OOPS:
             solved = [self._solve(learner, i) for i in range(len(self.expert_atoms))]
             index = int(np.argmin([s.cost for s in solved]))
             coupling = solved[index]
-        num_steps = len(learner)
-        scale = self.config.reward_scale * num_steps / np.sqrt(self.obs_dim)
+        # Each row's cost at mass 1 (not 1/T), per square root of the state's width.
+        cost = len(learner) / np.sqrt(self.obs_dim) * coupling.row_costs
+        if self.config.kernel == "linear":
+            rewards = -self.config.reward_scale * cost
+        else:
+            rewards = self.config.reward_scale * np.exp(-self.config.kernel_rate * cost)
         return RewardOutput(
-            rewards=-scale * coupling.row_costs,
+            rewards=rewards,
             coupling=coupling,
             distance=coupling.cost,
             demo_index=index,
