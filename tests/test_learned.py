@@ -1,4 +1,4 @@
-"""Agents trained on a learned reward (ilfo.training.learned) and the gaifo-td3 algo end to end."""
+"""Agents trained on a learned reward (ilfo.composition.learned), and gaifo-td3 end to end."""
 
 import json
 
@@ -9,10 +9,10 @@ import pytest
 
 from ilfo.agents import TD3Config, make_td3
 from ilfo.cli import main
+from ilfo.composition.learned import LearnedRewardSetup, RewardSchedule, with_learned_reward
 from ilfo.replay import ReplayData
 from ilfo.rewards import Discriminator, DiscriminatorConfig, expert_transitions
 from ilfo.training import Trainer
-from ilfo.training.learned import LearnedRewardSetup, RewardSchedule, with_learned_reward
 from test_train import TINY, _metrics, _train
 
 SMALL_DISC = {"update_every": 50, "updates": 2, "batch_size": 32, "hidden": (32, 32)}

@@ -24,9 +24,9 @@ from typing import Any
 import numpy as np
 
 from ilfo.agents import SACConfig, TD3Config, ddpg_config, make_sac, make_td3
-from ilfo.agents.opolo import OPOLOConfig, make_opolo
 from ilfo.agents.td7 import TD7Config, make_td7
 from ilfo.agents.trpo import TRPOConfig, make_trpo
+from ilfo.composition.opolo import OPOLOConfig, make_opolo
 from ilfo.rewards import (
     FIRL,
     OOPS,
@@ -71,7 +71,7 @@ class AgentPart(Part):
     trainer sets: see ``set_by_trainer``)."""
     make_learning: Callable[..., Any] | None = None
     """``make_learning(config, obs_dim, action_dim, max_action, setup)`` -> the agent's functions
-    trained on a learned reward (``setup``: ``ilfo.training.learned.LearnedRewardSetup``);
+    trained on a learned reward (``setup``: ``ilfo.composition.learned.LearnedRewardSetup``);
     None: the agent cannot use one."""
     on_policy: bool = False
     """Whether it learns from batches of its own fresh episodes (TRPO), not from a replay
@@ -166,13 +166,13 @@ def _td7_for_run(config: TD7Config, horizon: int, fixed_horizon: bool) -> TD7Con
 
 
 def _sac_learning(config: SACConfig, obs_dim: int, action_dim: int, max_action: float, setup):
-    from ilfo.training.learned import with_learned_reward
+    from ilfo.composition.learned import with_learned_reward
 
     return with_learned_reward(make_sac(config, obs_dim, action_dim, max_action), setup)
 
 
 def _td3_learning(config: TD3Config, obs_dim: int, action_dim: int, max_action: float, setup):
-    from ilfo.training.learned import with_learned_reward
+    from ilfo.composition.learned import with_learned_reward
 
     return with_learned_reward(make_td3(config, obs_dim, action_dim, max_action), setup)
 
@@ -285,13 +285,13 @@ def _firl_defaults(env_id: str) -> dict[str, Any]:
 
 
 def _firl_rollouts(config: FIRLConfig) -> Any:
-    from ilfo.training.learned import RolloutPlan
+    from ilfo.composition.learned import RolloutPlan
 
     return RolloutPlan(config.iteration_steps, config.rollouts)
 
 
 def _discriminator_schedule(config: DiscriminatorConfig) -> Any:
-    from ilfo.training.learned import RewardSchedule
+    from ilfo.composition.learned import RewardSchedule
 
     return RewardSchedule(config.update_every, config.updates)
 

@@ -26,8 +26,8 @@ import numpy as np
 from ilfo import demos as demo_io
 from ilfo.agents import Policy, policy_of
 from ilfo.envs import CONTACT_FORCE_DIMS, drop_contact_forces, make_env, termination_is_finish
-from ilfo.experiments.paper import paper_expert_returns
 from ilfo.files import file_sha256, load_msgpack
+from ilfo.paper import paper_expert_returns
 from ilfo.paths import DATA_DIR
 from ilfo.training import (
     BEST_POLICY_FILE,

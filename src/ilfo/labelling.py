@@ -41,8 +41,8 @@ from typing import Any, Literal
 import numpy as np
 
 from ilfo.envs import CONTACT_FORCE_DIMS, FULL_OBSERVATION_DIMS, match_observation_width
-from ilfo.experiments.worker import THREAD_VARIABLES
 from ilfo.rewards import OOPS, OOPSConfig
+from ilfo.threads import THREAD_VARIABLES
 from ilfo.training.config import imitation_drops_contact_forces
 
 Squashing = Literal["oops", "linear", "exponential"]

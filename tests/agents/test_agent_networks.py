@@ -1,4 +1,4 @@
-"""Tests of the agents' networks (ilfo.agents.networks)."""
+"""Tests of the agents' networks (ilfo.networks)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ilfo.agents.networks import (
+from ilfo.networks import (
     Critic,
     CriticEnsemble,
     DeterministicActor,
@@ -61,7 +61,7 @@ def test_torch_init_is_pytorch_linear_default():
 
 
 def test_critic_layer_norm_normalises_each_hidden_layer_and_is_off_by_default():
-    from ilfo.agents.networks import MLP
+    from ilfo.networks import MLP
 
     x = jax.random.normal(jax.random.PRNGKey(0), (5, 3)) * 100.0
     plain, normed = MLP((8, 8), 1), MLP((8, 8), 1, layer_norm=True)

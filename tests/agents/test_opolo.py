@@ -11,11 +11,11 @@ from ilfo.agents.inverse_dynamics import (
     RunningMoments,
     update_moments,
 )
-from ilfo.agents.opolo import OPOLOConfig, make_opolo
+from ilfo.composition.learned import LearnedRewardSetup, RewardSchedule
+from ilfo.composition.opolo import OPOLOConfig, make_opolo
 from ilfo.replay import ReplayData
 from ilfo.rewards import Discriminator, DiscriminatorConfig, expert_transitions
 from ilfo.training import Trainer, load_run_policy
-from ilfo.training.learned import LearnedRewardSetup, RewardSchedule
 from test_train import _metrics, _train
 
 

@@ -9,7 +9,7 @@ import pytest
 from agent_helpers import ACT_DIM, MAX_ACTION, OBS_DIM, TINY, random_buffer
 
 from ilfo.agents import SACConfig, make_sac
-from ilfo.agents.networks import sample_squashed
+from ilfo.networks import sample_squashed
 
 
 @pytest.fixture(scope="module")

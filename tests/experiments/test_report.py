@@ -14,7 +14,6 @@ from scipy import stats as scipy_stats
 
 from ilfo.algos import ALGOS
 from ilfo.experiments import stats
-from ilfo.experiments.paper import paper_ablation, paper_cells, paper_score
 from ilfo.experiments.report import (
     build_report,
     collect_runs,
@@ -22,6 +21,7 @@ from ilfo.experiments.report import (
     read_run,
     write_report,
 )
+from ilfo.paper import paper_ablation, paper_cells, paper_score
 
 
 def test_iqm_against_hand_and_scipy():

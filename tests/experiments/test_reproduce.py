@@ -12,10 +12,10 @@ import pytest
 
 from ilfo.algos import ALGOS
 from ilfo.cli import main
-from ilfo.experiments.paper import paper_cells
 from ilfo.experiments.report import TABLE4_ALGOS
 from ilfo.experiments.reproduce import ABLATIONS, BUDGETS, EXPERIMENTS, TABLE1_ALGOS, plan
 from ilfo.experiments.sweep import expand
+from ilfo.paper import paper_cells
 
 
 @pytest.mark.parametrize("name", list(EXPERIMENTS))

@@ -29,7 +29,8 @@ from ilfo.experiments import (
     select_runs,
     snapshot_sweep,
 )
-from ilfo.experiments.worker import pin_from_environment, thread_environment
+from ilfo.experiments.worker import pin_from_environment
+from ilfo.threads import thread_environment
 from ilfo.training import RunLock
 from ilfo.training.run_dir import (
     CHECKPOINT_FILES,

@@ -7,13 +7,6 @@ they read transitions from a ``ilfo.replay.ReplayData``.
 
 from ilfo.agents._common import Policy, policy_of
 from ilfo.agents.base import AgentFunctions
-from ilfo.agents.networks import (
-    MLP,
-    Critic,
-    CriticEnsemble,
-    DeterministicActor,
-    SquashedGaussianActor,
-)
 from ilfo.agents.sac import SAC, SACConfig, SACState, make_sac
 from ilfo.agents.td3 import (
     TD3,
@@ -24,6 +17,13 @@ from ilfo.agents.td3 import (
     ddpg_config,
     make_td3,
     pal_loss,
+)
+from ilfo.networks import (
+    MLP,
+    Critic,
+    CriticEnsemble,
+    DeterministicActor,
+    SquashedGaussianActor,
 )
 
 __all__ = [

@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from ilfo.agents.networks import MLP, Activation, InitName
+from ilfo.networks import MLP, Activation, InitName
 from ilfo.ranges import check_fields, learning_rate, non_negative, widths
 
 __all__ = [
@@ -67,7 +67,7 @@ class InverseDynamicsConfig:
     activation: Activation = "tanh"
     """Hidden activation."""
     init_scheme: InitName = "glorot"
-    """Initialisation (see ``ilfo.agents.networks``)."""
+    """Initialisation (see ``ilfo.networks``)."""
     lr: float = learning_rate(3e-4)
     """Adam learning rate."""
     l2: float = non_negative(1e-3)

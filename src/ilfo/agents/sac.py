@@ -31,7 +31,7 @@ from ilfo.agents._common import (
     make_optimizer,
     scan_updates,
 )
-from ilfo.agents.networks import (
+from ilfo.networks import (
     CriticEnsemble,
     SquashedGaussianActor,
     deterministic_squashed,

@@ -37,7 +37,7 @@ from ilfo.agents._common import (
     scan_update_groups,
     scan_updates,
 )
-from ilfo.agents.networks import CriticEnsemble, DeterministicActor, InitName
+from ilfo.networks import CriticEnsemble, DeterministicActor, InitName
 from ilfo.ranges import (
     batch,
     check_fields,
@@ -497,7 +497,7 @@ def delayed_updates(
     ``cond`` (which XLA schedules poorly on a CPU); they apply when the count is aligned with
     the delay (always with delay 1; with 2, when every episode is of even length); otherwise
     each update decides with a ``cond`` (``train_actor=None``). Used by TD3's ``update`` and by
-    updates that wrap TD3's step (``ilfo.training.learned``)."""
+    updates that wrap TD3's step (``ilfo.composition.learned``)."""
     delay = policy_delay
     group = [functools.partial(update_step, train_actor=False)] * (delay - 1)
     group.append(functools.partial(update_step, train_actor=True))

@@ -51,8 +51,8 @@ from ilfo.agents._common import (
     make_normalizer_setter,
     make_optimizer,
 )
-from ilfo.agents.networks import dense, ensemble
 from ilfo.agents.td3 import TimeAugmentationScheme, augment_time, delayed_updates, pal_loss
+from ilfo.networks import dense, ensemble
 from ilfo.ranges import (
     batch,
     check_fields,

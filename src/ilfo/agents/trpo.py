@@ -62,7 +62,7 @@ from numpy.typing import ArrayLike
 
 from ilfo.agents._common import Policy, as_float_bound, make_normalizer_setter
 from ilfo.agents.base import OnPolicyBatch
-from ilfo.agents.networks import dense
+from ilfo.networks import dense
 from ilfo.ranges import between, check_fields, count, fraction, non_negative, positive, widths
 
 __all__ = [

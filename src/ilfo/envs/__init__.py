@@ -18,6 +18,7 @@ from ilfo.envs.wrappers import (
     TimeFeature,
     episode_scores,
     time_feature,
+    with_time_feature,
 )
 
 __all__ = [
@@ -35,4 +36,5 @@ __all__ = [
     "match_observation_width",
     "termination_is_finish",
     "time_feature",
+    "with_time_feature",
 ]

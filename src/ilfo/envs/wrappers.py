@@ -24,6 +24,13 @@ def time_feature(t: int | np.ndarray, horizon: int) -> float | np.ndarray:
     return (horizon - t) / horizon
 
 
+def with_time_feature(observations: np.ndarray, horizon: int) -> np.ndarray:
+    """A whole episode's observations (T + 1, d) with the time feature appended as a last
+    column, as ``TimeFeature`` gives them one by one; the dtype of ``observations`` is kept."""
+    remaining = time_feature(np.arange(len(observations)), horizon)
+    return np.concatenate([observations, remaining[:, None]], axis=1)
+
+
 class IgnoreTermination(gym.Wrapper):
     """Turns ``terminated`` into ``info["env_terminated"] = True`` so the episode goes on."""
 

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from ilfo.experiments import stats
-from ilfo.experiments.paper import PaperCell, paper_ablation, paper_score
+from ilfo.paper import PaperCell, paper_ablation, paper_score
 
 SCORE = "eval_score_norm"
 RETURN = "eval_return_norm"

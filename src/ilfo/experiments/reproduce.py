@@ -600,7 +600,7 @@ def write_distances(
     import numpy as np
 
     from ilfo.experiments.distances import SPACES, pair_distances
-    from ilfo.experiments.paper import paper_cells
+    from ilfo.paper import paper_cells
     from ilfo.training.run_dir import DISTANCES_FILE
 
     runs, unfinished = _finished(runs)

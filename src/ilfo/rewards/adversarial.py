@@ -39,7 +39,7 @@ import numpy as np
 import optax
 from flax import serialization, traverse_util
 
-from ilfo.agents.networks import MLP
+from ilfo.networks import MLP
 
 __all__ = [
     "COSINE_EPS",

@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from ilfo.agents.networks import MLP, Activation, InitName
+from ilfo.networks import MLP, Activation, InitName
 from ilfo.ranges import batch, check_fields, count, learning_rate, non_negative, positive, widths
 from ilfo.rewards.learned import Transitions
 

@@ -19,7 +19,7 @@ docs/reproduction.md has the table of where ilfo departs). Each outer iteration,
    Theorem 4.1 gradient of FKL(rho_E || rho_theta) (the code drops the 1 / alpha).
 
 The agent's batches are rewarded by r_theta(s) of the state before the action (the code's
-``batch['obs']``), with the current parameters (``ilfo.training.learned``).
+``batch['obs']``), with the current parameters (``ilfo.composition.learned``).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from ilfo.agents.networks import dense
+from ilfo.networks import dense
 from ilfo.ranges import (
     batch,
     check_fields,

@@ -4,7 +4,7 @@ An episode reward (``EpisodeReward``: OOPS, PWIL) is computed once per learner e
 and written into the replay buffer. A learned reward (a discriminator, a reward network) changes
 while the agent learns, so rewards frozen in the buffer would go stale: instead the agent's
 jitted update asks it for the rewards of each sampled batch, with its current parameters
-(``ilfo.training.learned`` composes the two). Everything here is pure JAX: the reward's state
+(``ilfo.composition.learned`` composes the two). Everything here is pure JAX: the reward's state
 is a pytree (parameters, optimiser state, statistics) that is checkpointed with the agent's.
 
 Observations given to a learned reward are the environment's (no time feature).

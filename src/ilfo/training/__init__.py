@@ -41,6 +41,7 @@ from ilfo.training.config import (
 from ilfo.training.loop import LoopHooks, Trainer
 from ilfo.training.metrics import METRIC_FIELDS, read_metrics
 from ilfo.training.plots import plot_runs
+from ilfo.training.policy import RunPolicy, load_run_policy
 from ilfo.training.rollout import (
     PolicyScores,
     Rollout,
@@ -56,10 +57,8 @@ from ilfo.training.run_dir import (
     FINAL_POLICY_FILE,
     RunDirInUse,
     RunLock,
-    RunPolicy,
     create_run_dir,
     latest_checkpoint,
-    load_run_policy,
     read_run_config,
     read_settings,
 )

@@ -23,18 +23,18 @@ from ilfo import demos as demo_io
 from ilfo.agents import AgentFunctions
 from ilfo.agents.base import OnPolicyAgentFunctions
 from ilfo.algos import AGENT_PARTS, REWARD_PARTS, LearnedRewardPart, RewardPart
-from ilfo.envs import make_env, match_observation_width
+from ilfo.composition.learned import LearnedRewardSetup
+from ilfo.envs import make_env, match_observation_width, with_time_feature
 from ilfo.files import file_sha256
 from ilfo.paths import DATA_DIR
 from ilfo.rewards import OOPS, EpisodeReward, expert_transitions
 from ilfo.training.config import TrainConfig
-from ilfo.training.learned import LearnedRewardSetup
 from ilfo.training.resources import check_memory
 
 
 class Agent(NamedTuple):
     """An agent's functions as a run uses them, and whether its observations end with the time
-    feature remaining_steps / horizon (fixed-horizon runs: ``rollout.agent_observations``)."""
+    feature remaining_steps / horizon (fixed-horizon runs: ``agent_observations``)."""
 
     functions: AgentFunctions | OnPolicyAgentFunctions
     time_feature: bool
@@ -213,11 +213,17 @@ def load_demos(config: TrainConfig) -> list[demo_io.Episode]:
     return data.episodes[: config.num_demos]
 
 
+def agent_observations(observations: np.ndarray, horizon: int, time_feature: bool) -> np.ndarray:
+    """``rollout.agent_observation`` for a whole episode's observations (T + 1, d), as one
+    array; the dtype of ``observations`` is kept (the replay buffer stores float32 itself)."""
+    return with_time_feature(observations, horizon) if time_feature else observations
+
+
 def make_agent(config: TrainConfig, env: EnvInfo, demos: Sequence[np.ndarray] | None) -> Agent:
     """Build the agent of ``config.algo`` (its config: ``config.agent_config(env.horizon)``).
 
     Fixed-horizon runs append the time feature remaining_steps / horizon to observations.
-    Algos with a learned reward get the agent trained on it (``ilfo.training.learned``), which
+    Algos with a learned reward get the agent trained on it (``ilfo.composition.learned``), which
     learns from ``demos`` (each (T_i + 1, obs_dim)); ``demos=None`` builds it only as a template
     to read a saved state into (its reward's input statistics are then placeholders, zeros).
     """
@@ -230,8 +236,6 @@ def make_agent(config: TrainConfig, env: EnvInfo, demos: Sequence[np.ndarray] | 
         return Agent(part.make(agent_config, *dims), time_feature)
     reward_part = REWARD_PARTS[algo.reward]
     assert isinstance(reward_part, LearnedRewardPart) and part.make_learning is not None
-    from ilfo.training.rollout import agent_observations  # rollout imports this module
-
     reward_config = config.part_config(algo.reward)
     reward = reward_part.make(reward_config)
     schedule = reward_part.schedule(reward_config)

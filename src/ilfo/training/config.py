@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Any, Literal
 
 from ilfo.agents import SACConfig, TD3Config
-from ilfo.agents.opolo import OPOLOConfig
 from ilfo.agents.td7 import TD7Config
 from ilfo.agents.trpo import TRPOConfig
 from ilfo.algos import (
@@ -23,6 +22,7 @@ from ilfo.algos import (
     algos_using,
     recipe,
 )
+from ilfo.composition.opolo import OPOLOConfig
 from ilfo.config import dataclass_from_dict, flag_name
 from ilfo.envs.make import CONTACT_FORCE_DIMS
 from ilfo.ranges import SettingError, check_fields, count, non_negative, rng_seed

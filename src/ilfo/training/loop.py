@@ -609,7 +609,7 @@ class Trainer:
 
     def _restore(self, path: Path) -> None:
         """Continue from checkpoint directory ``path`` (``checkpoint.load_checkpoint``); to read
-        a run without continuing it, see ``run_dir.load_run_policy``."""
+        a run without continuing it, see ``policy.load_run_policy``."""
         dims = (self.buffer.obs_dim, self.buffer.action_dim)
         ckpt = load_checkpoint(path, self.state, dims)
         self.refill_until = ckpt.refill_until

@@ -17,7 +17,7 @@ import numpy as np
 from ilfo import envs
 from ilfo.agents import policy_of
 from ilfo.envs import episode_scores
-from ilfo.training.build import Agent
+from ilfo.training.build import Agent, agent_observations
 
 
 def agent_observation(obs: np.ndarray, t: int, horizon: int, time_feature: bool) -> np.ndarray:
@@ -26,15 +26,6 @@ def agent_observation(obs: np.ndarray, t: int, horizon: int, time_feature: bool)
     if time_feature:
         return np.append(obs, envs.time_feature(t, horizon)).astype(np.float32)
     return np.asarray(obs, dtype=np.float32)
-
-
-def agent_observations(observations: np.ndarray, horizon: int, time_feature: bool) -> np.ndarray:
-    """``agent_observation`` for a whole episode's observations (T + 1, d), as one array; the
-    dtype of ``observations`` is kept (the replay buffer stores float32 itself)."""
-    if not time_feature:
-        return observations
-    remaining = envs.time_feature(np.arange(len(observations)), horizon)
-    return np.concatenate([observations, remaining[:, None]], axis=1)
 
 
 def env_action(action: np.ndarray, max_action: float) -> np.ndarray:

@@ -14,8 +14,9 @@ started together (a sweep) from mixing, and keep a run resumable whatever moment
 - A run with no complete checkpoint starts again from step 0 only where it holds nothing a run
   writes after its first checkpoint (``results_past_first_checkpoint``): a finished run whose
   checkpoints were removed keeps its results, and is not resumed.
-- ``read_run_config`` and ``load_run_policy`` read a run directory for any reader (evaluation,
-  experts, bench scripts), with a ``ValueError`` naming the file for a damaged one.
+- ``read_run_config`` reads a run directory for any reader (evaluation, experts, bench scripts;
+  ``policy.load_run_policy`` its policy), with a ``ValueError`` naming the file for a damaged
+  one.
 """
 
 from __future__ import annotations
@@ -29,16 +30,12 @@ import os
 import re
 import shutil
 import signal
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ilfo.files import check_new_copy_dir, load_msgpack, read_json, read_settings_file
+from ilfo.files import check_new_copy_dir, read_json, read_settings_file
 
-if TYPE_CHECKING:  # at run time these are imported where used: they import this module
-    from ilfo.agents import Policy
-    from ilfo.training.build import Agent, EnvInfo
-    from ilfo.training.checkpoint import Checkpoint
+if TYPE_CHECKING:  # for annotations only: the run directory's format needs no agents
     from ilfo.training.config import TrainConfig
 
 CONFIG_FILE = "config.json"
@@ -354,58 +351,6 @@ def fault_point(name: str) -> None:
 BEST_POLICY_FILE = "best_policy.msgpack"
 BEST_POLICY_INFO = "best_policy.json"  # the step and evaluation of best_policy.msgpack
 FINAL_POLICY_FILE = "policy.msgpack"
-
-
-@dataclass(frozen=True)
-class RunPolicy:
-    """A run's policy, with what it takes to act with it (no trainer, no replay buffer)."""
-
-    config: TrainConfig
-    env: EnvInfo
-    agent: Agent
-    policy: Policy
-    source: str
-    """Where it came from: ``policy.msgpack``, ``best_policy.msgpack`` or ``latest
-    checkpoint``."""
-    checkpoint: Checkpoint | None = None
-    """The checkpoint it was read from (its counters and evaluations; no replay buffer)."""
-
-    def eval_env(self, render_mode: str | None = None) -> Any:
-        """An environment as the run's evaluations used: fixed-horizon episodes of the run's
-        horizon, its healthy angle range."""
-        from ilfo.training.build import make_run_env
-
-        return make_run_env(self.config, True, horizon=self.env.horizon, render_mode=render_mode)
-
-
-def load_run_policy(run_dir: str | Path, which: str = "final") -> RunPolicy:
-    """A run's policy: ``final`` (``policy.msgpack``, written when the run finished, else the
-    newest checkpoint's), ``best`` (``best_policy.msgpack``, the best-evaluated so far) or
-    ``latest`` (the newest checkpoint's). Clear errors for what is missing or damaged."""
-    from ilfo.agents import policy_of
-    from ilfo.training.build import env_info, make_agent, make_run_env
-    from ilfo.training.checkpoint import load_checkpoint
-    from ilfo.training.config import config_from_dict
-
-    if which not in ("final", "best", "latest"):
-        raise ValueError(f"which must be 'final', 'best' or 'latest', got {which!r}")
-    run_dir = Path(run_dir)
-    config = config_from_dict(read_run_config(run_dir), run_dir / CONFIG_FILE)
-    # The run's environment, built only to read its spaces and horizon.
-    env = env_info(make_run_env(config, config.uses_fixed_horizon), config.env)
-    agent = make_agent(config, env, demos=None)  # a template: its state is read from files
-    template = agent.functions.init(config.seed)
-    file = {"final": FINAL_POLICY_FILE, "best": BEST_POLICY_FILE}.get(which)
-    if which == "best" and not (run_dir / BEST_POLICY_FILE).is_file():
-        raise FileNotFoundError(f"{run_dir} has no {BEST_POLICY_FILE} (no evaluation yet)")
-    if file is not None and (run_dir / file).is_file():
-        policy = load_msgpack(policy_of(template), run_dir / file, "policy")
-        return RunPolicy(config, env, agent, policy, file)
-    ckpt = latest_checkpoint(run_dir)
-    if ckpt is None:
-        raise FileNotFoundError(f"{run_dir} has neither {FINAL_POLICY_FILE} nor a checkpoint")
-    loaded = load_checkpoint(ckpt, template, buffer_dims=None)
-    return RunPolicy(config, env, agent, policy_of(loaded.agent_state), "latest checkpoint", loaded)
 
 
 DISTANCES_FILE, SOLVERS_FILE = "distances.json", "solvers.json"

@@ -46,8 +46,8 @@ from ilfo.agents.inverse_dynamics import (
     InverseDynamicsConfig,
     InverseDynamicsState,
 )
-from ilfo.agents.networks import CriticEnsemble, DeterministicActor, InitName
 from ilfo.agents.td3 import delayed, delayed_updates
+from ilfo.networks import CriticEnsemble, DeterministicActor, InitName
 from ilfo.ranges import (
     batch,
     check_fields,
@@ -306,7 +306,7 @@ def make_opolo(
         config: hyperparameters.
         obs_dim: the agent's observation size (time feature included where the run has one).
         action_dim, max_action: the action box [-max_action, max_action]^action_dim.
-        setup: the learned reward and expert data (``ilfo.training.learned.LearnedRewardSetup``);
+        setup: the learned reward and expert data (``ilfo.composition.learned.LearnedRewardSetup``);
             the reward is OPOLO's discriminator.
     """
     cfg, tf = config, setup.time_feature
