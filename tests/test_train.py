@@ -447,20 +447,19 @@ def test_ctrl_c_mid_episode_finishes_the_episode_checkpoints_and_resumes_exactly
     import os
     import signal
 
+    from ilfo.training import LoopHooks
+
+    class InterruptInEpisode3(LoopHooks):
+        def episode_rewarded(self, trainer, output):
+            # Inside episode 3, as a user's Ctrl-C would land; its end, step 300, is no
+            # scheduled checkpoint (every 200): the stop request alone makes it.
+            if trainer.episode == 3:
+                os.kill(os.getpid(), signal.SIGINT)
+
     full = _metrics(_train(tmp_path, "full"))
     config = TrainConfig(**{**TINY, "steps": 600})
-    trainer = Trainer(config, tmp_path / "interrupted", progress=False)
-    rewarder, calls = trainer.rewarder, []
-
-    def interrupting_rewarder(observations):
-        calls.append(1)
-        # Inside episode 3, as a user's Ctrl-C would land; its end, step 300, is no scheduled
-        # checkpoint (every 200): the stop request alone makes it.
-        if len(calls) == 3:
-            os.kill(os.getpid(), signal.SIGINT)
-        return rewarder(observations)
-
-    trainer.rewarder = interrupting_rewarder
+    hooks = InterruptInEpisode3()
+    trainer = Trainer(config, tmp_path / "interrupted", progress=False, hooks=hooks)
     with pytest.raises(KeyboardInterrupt):
         trainer.train()
     run = tmp_path / "interrupted"

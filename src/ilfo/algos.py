@@ -19,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -84,6 +84,9 @@ class RewardPart(Part):
 
     make: Callable[[Sequence[np.ndarray], Any], EpisodeReward]
     """``make(demos, config)`` -> the reward; demos are observation arrays (T_i + 1, obs_dim)."""
+    learns_per_batch: bool = False
+    """Whether it is a ``BatchLearningReward`` (SIL's critic): the loop calls its ``end_batch``
+    each time the on-policy agent has learned from a batch."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -98,6 +101,9 @@ class LearnedRewardPart(Part):
     rollouts: Callable[[Any], Any] | None = None
     """``rollouts(config)`` -> its ``RolloutPlan`` where it learns from fresh episodes of the
     policy (f-IRL); None otherwise."""
+
+
+LearnerKind = Literal["off_policy", "learned_reward", "on_policy"]
 
 
 @dataclass(frozen=True)
@@ -144,6 +150,16 @@ class Recipe:
     def learned(self) -> bool:
         """Whether its reward is learned during training (a ``LearnedRewardPart``)."""
         return self.reward is not None and isinstance(REWARD_PARTS[self.reward], LearnedRewardPart)
+
+    @property
+    def learner(self) -> LearnerKind:
+        """Its kind of learner, which picks the training loop's strategy
+        (``training.learners``): ``on_policy`` (batches of its own fresh episodes: TRPO),
+        ``learned_reward`` (a replay-buffer agent on a reward learned in its update) or
+        ``off_policy`` (a replay-buffer agent on an episode reward or the task reward)."""
+        if AGENT_PARTS[self.agent].on_policy:
+            return "on_policy"
+        return "learned_reward" if self.learned else "off_policy"
 
 
 def _td3_default(preset: str) -> TD3Config:
@@ -316,6 +332,7 @@ REWARD_PARTS: dict[str, RewardPart | LearnedRewardPart] = {
     "sil": RewardPart(
         config=SILConfig,
         make=SIL,
+        learns_per_batch=True,
         title="SIL-(s,s') reward (adversarial critic)",
         description="Defaults: the SIL authors' code (docs/notes/sil-spec.md). Set by the "
         "trainer: seed.",

@@ -44,4 +44,5 @@ def emd(
         g=np.asarray(log["v"], dtype=np.float64),
         iterations=None,
         converged=log["result_code"] == 1,
+        solver="emd",
     )

@@ -52,4 +52,6 @@ def greedy(cost: np.ndarray, a: np.ndarray | None = None, b: np.ndarray | None =
             if left[j] <= eps:
                 row[j] = spent[j] = np.inf
     all_placed = abs(plan.sum() - a.sum()) <= _PLACED_RTOL * a.sum()
-    return make_result(plan, cost, a, b, f=None, g=None, iterations=0, converged=all_placed)
+    return make_result(
+        plan, cost, a, b, f=None, g=None, iterations=0, converged=all_placed, solver="greedy"
+    )

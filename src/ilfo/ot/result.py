@@ -28,6 +28,7 @@ class OTResult:
             ``|plan.sum(1) - a|_1 + |plan.sum(0) - b|_1``, computed on the returned plan; absolute
             (in units of mass: divide by ``sum(a)`` for a relative error). b is the one the
             solver used: Sinkhorn and EMD rescale it to a's mass where the two differ by rounding.
+        solver: The solver that made it, ``sinkhorn``, ``emd`` or ``greedy``.
     """
 
     plan: np.ndarray
@@ -38,6 +39,7 @@ class OTResult:
     iterations: int | None
     converged: bool
     marginal_error: float
+    solver: str
 
     @property
     def potentials(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -62,6 +64,7 @@ def make_result(
     g: np.ndarray | None,
     iterations: int | None,
     converged: bool,
+    solver: str,
 ) -> OTResult:
     """Build an :class:`OTResult`, deriving the costs and the marginal error from ``plan``."""
     row_costs = np.einsum("ij,ij->i", cost_matrix, plan)
@@ -76,4 +79,5 @@ def make_result(
         iterations=iterations,
         converged=bool(converged),
         marginal_error=marginal_error(plan, a, b),
+        solver=solver,
     )

@@ -121,7 +121,15 @@ def sinkhorn(
     g = np.full(cost.shape[1], -np.inf)
     f[rows], g[cols] = sub.f, sub.g
     result = make_result(
-        plan, cost, a, b, f=f, g=g, iterations=sub.iterations, converged=sub.converged
+        plan,
+        cost,
+        a,
+        b,
+        f=f,
+        g=g,
+        iterations=sub.iterations,
+        converged=sub.converged,
+        solver="sinkhorn",
     )
     return _judged(result, tol_mass)
 
@@ -214,7 +222,9 @@ def _solve(
     g += reg * np.log(v)
     kernel *= u[:, None]
     kernel *= v[None, :]
-    return make_result(kernel, cost, a, b, f=f, g=g, iterations=iterations, converged=converged)
+    return make_result(
+        kernel, cost, a, b, f=f, g=g, iterations=iterations, converged=converged, solver="sinkhorn"
+    )
 
 
 def _newton(

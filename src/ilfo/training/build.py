@@ -33,17 +33,12 @@ from ilfo.training.resources import check_memory
 
 
 class Agent(NamedTuple):
-    """An agent's functions as a run uses them, and whether its observations end with the time
-    feature remaining_steps / horizon (fixed-horizon runs: ``agent_observations``)."""
+    """An agent's functions as a run uses them (which kind they are: ``Recipe.learner``), and
+    whether its observations end with the time feature remaining_steps / horizon
+    (fixed-horizon runs: ``agent_observations``)."""
 
     functions: AgentFunctions | OnPolicyAgentFunctions
     time_feature: bool
-
-    @property
-    def on_policy(self) -> bool:
-        """Whether the agent learns from batches of its own fresh episodes (TRPO) rather than
-        from a replay buffer."""
-        return hasattr(self.functions, "learn")
 
 
 class EnvInfo(NamedTuple):

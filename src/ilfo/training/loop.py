@@ -26,7 +26,6 @@ import jax
 import numpy as np
 
 from ilfo.agents import policy_of
-from ilfo.agents.base import OnPolicyBatch
 from ilfo.files import write_bytes_atomic, write_json_atomic
 from ilfo.replay import ReplayBuffer
 from ilfo.rewards import RewardOutput
@@ -44,6 +43,7 @@ from ilfo.training.checkpoint import (
     save_checkpoint,
 )
 from ilfo.training.config import TrainConfig, config_from_dict
+from ilfo.training.learners import Learner, learner_of
 from ilfo.training.metrics import MetricsLog, truncate_metrics
 from ilfo.training.plots import plot_runs
 from ilfo.training.rollout import (
@@ -51,7 +51,6 @@ from ilfo.training.rollout import (
     agent_observations,
     env_action,
     evaluation_seeds,
-    rollout_policy,
     score_policy,
 )
 from ilfo.training.run_dir import (
@@ -73,8 +72,6 @@ from ilfo.training.run_dir import (
 )
 
 _NOTHING = contextlib.nullcontext()
-_LOGGED = {"critic_loss", "actor_loss", "reward_mean", "reward_loss", "reward_accuracy"}
-"""The update and reward metrics that episode rows log (``metrics.METRIC_FIELDS``)."""
 
 
 class LoopHooks:
@@ -125,8 +122,10 @@ class Trainer:
         self.rewarder = make_reward(config, self.demos)
         self.unconverged_rewards = 0  # episodes whose coupling missed its tolerance
         self.agent = make_agent(config, env, self.demos)
+        self.learner: Learner = learner_of(config.recipe, self.agent.functions)
+        """What this kind of learner does differently in the loop (``training.learners``)."""
         self.state = self.agent.functions.init(config.seed)
-        self.buffer = self._new_buffer()
+        self.buffer = self.new_buffer()
         self.step = 0
         self.episode = 0
         self.random_states: list[np.ndarray] = []
@@ -140,7 +139,7 @@ class Trainer:
         # Whether the policy may differ from the one last evaluated: always, for an off-policy
         # agent; for an on-policy one, after each ``learn`` (and after a resume: recomputing
         # the last evaluation gives the same numbers).
-        self._policy_changed = True
+        self.policy_changed = True
         self.refill_until = 0
         """Updates wait until this step (a run continued from a snapshot refills its buffer)."""
 
@@ -265,10 +264,10 @@ class Trainer:
         self.unconverged_rewards += 1
         if self.unconverged_rewards == 1:
             coupling = output.coupling
-            solver = getattr(getattr(self.rewarder, "config", None), "solver", None)
+            solver = coupling.solver
             advice = " A larger max_iter or reg converges sooner." if solver == "sinkhorn" else ""
             warnings.warn(
-                f"episode {self.episode}: the reward's {solver or 'OT'} coupling did not "
+                f"episode {self.episode}: the reward's {solver} coupling did not "
                 f"converge ({coupling.iterations} iterations, marginal error "
                 f"{coupling.marginal_error:.3g}); its rewards are used as they are. Later "
                 f"ones are not reported (Trainer.unconverged_rewards counts them).{advice}",
@@ -279,7 +278,7 @@ class Trainer:
         """Collect, reward, store and learn from one episode; evaluate when due."""
         cfg = self.config
         # An on-policy agent collects with its own policy from the start (SIL's code).
-        random_phase = self.step < cfg.random_steps and not self.agent.on_policy
+        random_phase = self.step < cfg.random_steps and not self.learner.on_policy
         refilling = self.step < self.refill_until
         if not random_phase and not bool(self.state.normalizer_set):
             self._fit_normalizer()
@@ -291,23 +290,7 @@ class Trainer:
         self.step += num_steps
         self.episode += 1
 
-        if self.rewarder is not None:
-            with self.hooks.timed("reward"):
-                output = self.rewarder(observations)
-            self.hooks.episode_rewarded(self, output)
-            rewards = output.rewards
-            if not output.coupling.converged:
-                self._report_unconverged(output)
-        elif self.config.recipe.learned:
-            # The agent's update rewards its batches with the reward's parameters of the time;
-            # these (today's, stored but not learned from) are the episode's proxy return.
-            funcs = self.agent.functions
-            with self.hooks.timed("reward"):
-                rewards = np.asarray(funcs.rewards(self.state, observations[:-1], observations[1:]))
-        else:
-            rewards = np.asarray(task_rewards)
-            if cfg.uses_fixed_horizon:
-                rewards = np.where(env_terminated, 0.0, rewards)
+        rewards = self._episode_rewards(observations, task_rewards, env_terminated)
         agent_obs = agent_observations(observations, self.horizon, self.agent.time_feature)
         # The paper's code cuts bootstrapping at the end of a fixed-horizon episode (its time
         # feature is then 0); standard mode bootstraps through truncation only.
@@ -324,34 +307,44 @@ class Trainer:
             "train_task_return": round(float(np.sum(task_rewards)), 4),
             "_steps": num_steps,
         }
-        if self.agent.on_policy:
-            if self.buffer.size >= self.agent.functions.batch_steps:
-                with self.hooks.timed("update"):
-                    metrics = self._learn_on_policy()
-                row.update({name: round(value, 5) for name, value in metrics.items()})
-        elif not random_phase and not refilling:
-            with self.hooks.timed("update"):
-                self.state, metrics = self._update(num_steps * cfg.updates_per_step)
-            row.update({name: round(value, 5) for name, value in metrics.items()})
-        plan = getattr(self.agent.functions, "rollouts", None)
-        if plan is not None and self.step // plan.every > (self.step - num_steps) // plan.every:
-            with self.hooks.timed("reward"):
-                trajectories = self._policy_rollouts(plan.episodes, self.step // plan.every)
-                self.state, metrics = self.agent.functions.learn_from_rollouts(
-                    self.state, trajectories
-                )
-                # Reading the metrics waits for the jitted learning: timed as "reward".
-                row.update({k: round(float(v), 5) for k, v in metrics.items() if k in _LOGGED})
+        metrics = self.learner.learn(self, num_steps, not random_phase and not refilling)
+        row.update({name: round(value, 5) for name, value in metrics.items()})
         if self.step // cfg.eval_every > (self.step - num_steps) // cfg.eval_every:
             # An on-policy agent's policy changes only when it learns, and evaluation is
             # deterministic (fixed seeds): between two learns it would score the same again.
-            if self._policy_changed or not self.last_eval:
+            if self.policy_changed or not self.last_eval:
                 with self.hooks.timed("evaluate"):
                     self.last_eval = self.evaluate()
-                self._policy_changed = not self.agent.on_policy
+                self.policy_changed = not self.learner.on_policy
             row.update(self.last_eval)
             self._keep_best()
         return row
+
+    def _episode_rewards(
+        self, observations: np.ndarray, task_rewards: list, env_terminated: list
+    ) -> np.ndarray:
+        """The episode's rewards: the learner's own (a learned reward's), else the episode
+        reward's, else the task reward (zeroed on reported terminations in fixed-horizon runs,
+        whose episodes go on)."""
+        with self.hooks.timed("reward"):
+            rewards = self.learner.episode_rewards(self, observations)
+            if rewards is not None or self.rewarder is None:
+                output = None
+            else:
+                output = self.rewarder(observations)
+        if rewards is not None:
+            return rewards
+        if output is None:
+            rewards = np.asarray(task_rewards)
+            return (
+                np.where(env_terminated, 0.0, rewards)
+                if self.config.uses_fixed_horizon
+                else rewards
+            )
+        self.hooks.episode_rewarded(self, output)
+        if not output.coupling.converged:
+            self._report_unconverged(output)
+        return output.rewards
 
     def _collect(self, random_phase: bool) -> tuple[np.ndarray, list, list, list, bool]:
         """One episode of the frozen policy (uniform actions in the random phase): its
@@ -384,97 +377,18 @@ class Trainer:
                 break
         return np.asarray(observations), actions, task_rewards, env_terminated, terminated
 
-    def _policy_rollouts(self, episodes: int, iteration: int) -> np.ndarray:
-        """States s_1..s_T (episodes, T, obs_dim) of fresh fixed-horizon episodes of the current
-        policy with its exploration, for a reward that learns from them (f-IRL); not stored,
-        not counted as steps. A fall that ends an episode early (standard episodes) repeats
-        its last state to the horizon, as f-IRL's code does. Their randomness comes from
-        (seed, iteration) alone."""
-        rng = np.random.default_rng([self.config.seed, iteration, 1])
-        key = jax.random.fold_in(jax.random.PRNGKey(self.config.seed), 1_000_003 + iteration)
-        trajectories = []
-        for k in range(episodes):
-            rollout = rollout_policy(
-                self.env,
-                self.agent,
-                self.state,
-                self.horizon,
-                seed=int(rng.integers(2**31)),
-                key=jax.random.fold_in(key, k),
-            )
-            states = rollout.observations[1:]
-            pad = np.repeat(states[-1:], self.horizon - len(states), axis=0)
-            trajectories.append(np.concatenate([states, pad]).astype(np.float32))
-        return np.stack(trajectories)
-
-    def _update(self, num_updates: int) -> tuple[Any, dict[str, float]]:
-        """``num_updates`` agent updates, run as jitted chunks of power-of-two sizes.
-
-        ``update`` compiles once per number of updates; episodes of every length would each
-        compile anew, whereas powers of two compile at most log2(horizon * updates_per_step) + 1
-        times. Every update draws its keys from the state, so chunks give exactly the updates
-        one call would. Metrics are averaged over the chunks that report them (a learned
-        reward reports its own only from chunks in which it took steps).
-        """
-        state, totals, weights = self.state, {}, {}
-        remaining, chunk = num_updates, 1 << (num_updates.bit_length() - 1)
-        while remaining:
-            if chunk <= remaining:
-                state, metrics = self.agent.functions.update(
-                    state, self.buffer.data, self.buffer.size, num_updates=chunk
-                )
-                for name in _LOGGED.intersection(metrics):
-                    totals[name] = totals.get(name, 0.0) + float(metrics[name]) * chunk
-                    weights[name] = weights.get(name, 0) + chunk
-                remaining -= chunk
-            chunk >>= 1
-        return state, {name: totals[name] / weights[name] for name in totals}
-
-    def _learn_on_policy(self) -> dict[str, float]:
-        """One iteration of the on-policy agent on the episodes collected since the last (all
-        of the buffer's), then the batch-learning reward's step on the same episodes (SIL's
-        critic), and an empty buffer for the next batch. The agent's value loss is logged
-        as ``critic_loss``, its other metrics (TensorBoard only) prefixed with
-        ``agent_``."""
-        size = self.buffer.size
-        data = jax.tree.map(lambda x: np.asarray(x[:size]), self.buffer.data)
-        episode_end = np.zeros(size, bool)
-        for start, length in self.buffer.episodes.values():
-            episode_end[start + length - 1] = True
-        batch = OnPolicyBatch(data.obs, data.action, data.reward, episode_end)
-        self.state, learned = self.agent.functions.learn(self.state, batch)
-        self._policy_changed = True
-        metrics = {
-            "critic_loss" if k == "value_loss" else f"agent_{k}": float(v)
-            for k, v in learned.items()
-        }
-        end_batch = getattr(self.rewarder, "end_batch", None)
-        if end_batch is not None:
-            metrics.update({k: float(v) for k, v in end_batch().items()})
-        self.buffer = self._new_buffer()
-        return metrics
-
-    def _new_buffer(self) -> ReplayBuffer:
-        """An empty buffer: the replay buffer of ``replay_capacity`` transitions, or for an
-        on-policy agent its batch under collection (at most a batch and an episode)."""
-        funcs, obs_dim = self.agent.functions, self.obs_dim + int(self.agent.time_feature)
-        if self.agent.on_policy:
-            capacity = funcs.batch_steps + self.horizon
-        else:
-            capacity = self.config.replay_capacity
-            if capacity < self.horizon:  # else it fails at the first episode's end
-                raise ValueError(
-                    f"replay_capacity (--replay-capacity) must hold an episode: at least the "
-                    f"horizon, {self.horizon}; got {capacity}"
-                )
-        return ReplayBuffer(capacity, obs_dim, self.action_dim)
+    def new_buffer(self) -> ReplayBuffer:
+        """An empty buffer of the capacity this kind of learner keeps: the replay buffer of
+        ``replay_capacity`` transitions, or an on-policy agent's batch under collection."""
+        obs_dim = self.obs_dim + int(self.agent.time_feature)
+        return ReplayBuffer(self.learner.buffer_capacity(self), obs_dim, self.action_dim)
 
     def _fit_normalizer(self) -> None:
         """Fix the networks' normaliser once, when the policy takes over: see
         ``build.network_normalizer``. An on-policy agent has no random phase: its normaliser
         is the demos' states' (mean, std floored as there)."""
         demo_states = [d[:-1] for d in self.demos]
-        if self.agent.on_policy and demo_states:
+        if self.learner.on_policy and demo_states:
             states, expert = np.concatenate(demo_states), []
         elif self.random_states:
             states, expert = np.concatenate(self.random_states), demo_states
@@ -520,7 +434,7 @@ class Trainer:
         the disk first, so that metrics.csv and TensorBoard's events hold every row up to it."""
         if self._metrics is not None:
             self._metrics.flush()
-        reward_state = None if self.rewarder is None else _reward_state(self.rewarder)
+        reward_state = None if self.rewarder is None else self.rewarder.state()
         ckpt = Checkpoint(
             step=self.step,
             episode=self.episode,
@@ -614,7 +528,7 @@ class Trainer:
         ckpt = load_checkpoint(path, self.state, dims)
         self.refill_until = ckpt.refill_until
         if ckpt.buffer is None:  # a snapshot's checkpoint (run_dir.snapshot_run)
-            if self.agent.on_policy:
+            if self.learner.on_policy:
                 raise ValueError(
                     f"{path} has no replay buffer (a snapshot taken before ilfo kept an "
                     "on-policy run's): an on-policy run keeps its pending batch there and "
@@ -641,12 +555,6 @@ class Trainer:
         import flax.serialization
 
         write_bytes_atomic(self.run_dir / name, flax.serialization.to_bytes(policy_of(self.state)))
-
-
-def _reward_state(reward: Any) -> Any:
-    """The reward's ``state()``; None for a plain callable (tests wrap rewards in functions)."""
-    state = getattr(reward, "state", None)
-    return None if state is None else state()
 
 
 class _StopRequest:
