@@ -268,5 +268,5 @@ def test_cli_and_bad_input(tmp_path, capsys):
 
 
 def test_the_labeller_refuses_an_oops_kernel_it_would_ignore():
-    with pytest.raises(ValueError, match="not by oops.kernel"):
+    with pytest.raises(ValueError, match=r"not by oops\.kernel"):
         LabelConfig(oops=OOPSConfig(kernel="exponential"))
