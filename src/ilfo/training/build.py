@@ -25,7 +25,7 @@ from ilfo.agents.base import OnPolicyAgentFunctions
 from ilfo.algos import AGENT_PARTS, REWARD_PARTS, LearnedRewardPart, RewardPart
 from ilfo.envs import make_env, match_observation_width
 from ilfo.files import file_sha256
-from ilfo.paths import DATA_DIR
+from ilfo.paths import default_demos_path
 from ilfo.rewards import OOPS, EpisodeReward, expert_transitions
 from ilfo.training.config import TrainConfig
 from ilfo.training.learned import LearnedRewardSetup
@@ -179,11 +179,6 @@ def load_demo_set(config: TrainConfig, obs_dim: int) -> DemoSet:
     path = demos_path(config)
     source = DemoSource(str(path.resolve()), file_sha256(path), len(episodes), mean)
     return DemoSet(observations, mean, OOPS(observations[:1]), source)
-
-
-def default_demos_path(env_id: str) -> Path:
-    """The shipped expert demos of ``env_id``."""
-    return DATA_DIR / "experts" / env_id / "demos.npz"
 
 
 def demos_path(config: TrainConfig) -> Path:
