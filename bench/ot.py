@@ -17,7 +17,7 @@ marginal error and its largest difference from ilfo's plan.
     python bench/ot.py --json     # one JSON line per case and method
     python bench/ot.py --quick    # sinkhorn_log capped at 500 iterations (time extrapolated)
 
-Data: data/demos/Hopper-v5-scripted.npz (scripted policies, see the README), and the shipped
+Data: data/demos/Hopper-v5-scripted.npz (scripted policies, see docs/guide.md), and the shipped
 Hopper expert's demos (data/experts/Hopper-v5/demos.npz) for the expert case.
 """
 

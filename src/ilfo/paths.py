@@ -17,3 +17,10 @@ def bundled_demos(name: str) -> Path:
             f"no bundled demos named {name!r} in {path.parent}; available: {available or 'none'}"
         )
     return path
+
+
+def default_demos_path(env_id: str) -> Path:
+    """The shipped expert demos of ``env_id``, data/experts/<env_id>/demos.npz: what
+    ``ilfo train --env ENV`` imitates without ``--demos`` (the file may not exist: not every env
+    has a shipped expert)."""
+    return DATA_DIR / "experts" / env_id / "demos.npz"

@@ -3,7 +3,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ilfo.rewards import OOPS, PWIL, OOPSConfig, PWILConfig, Standardizer
+from ilfo import demos as demo_io
+from ilfo.rewards import OOPS, PWIL, OOPSConfig, PWILConfig, Standardizer, expert_transitions
 
 
 def _episode(length=40, dim=5, seed=0, scale=1.0):
@@ -250,6 +251,38 @@ def test_bad_demos(make):
         make([_episode(), np.full((5, 5), np.nan)])
     with pytest.raises(ValueError, match="at least 2 observations"):
         make([np.zeros((1, 5))])
+
+
+@pytest.mark.parametrize("make", [OOPS, PWIL, expert_transitions])
+def test_demos_given_as_files_are_a_type_error_saying_what_to_pass(make, tmp_path):
+    path = tmp_path / "demos.npz"
+    demo_io.save(path, [demo_io.Episode(_episode()), demo_io.Episode(_episode(seed=1))], "")
+    loaded = demo_io.load(path)
+    for given_as in (str(path), path):
+        with pytest.raises(TypeError, match=r"not the file name .*demos\.npz.*ilfo\.demos\.load"):
+            make(given_as)
+    with pytest.raises(TypeError, match=r"not a DemoFile: pass \[e\.observations for e in"):
+        make(loaded)
+    with pytest.raises(TypeError, match="demo 1 is an Episode, not an array"):
+        make([_episode(), loaded.episodes[1]])
+    kind = type(path).__name__  # PosixPath or WindowsPath
+    with pytest.raises(TypeError, match=rf"demo 0 is a {kind}, not an array.*ilfo\.demos\.load"):
+        make([path])
+    with pytest.raises(TypeError, match=r"a list of arrays of observations .* got int"):
+        make(3)
+    # What the messages say to pass is what the reward takes.
+    observations = [e.observations for e in loaded.episodes]
+    assert make(observations) is not None
+
+
+@pytest.mark.parametrize("make", [OOPS, PWIL])
+def test_demos_that_are_not_numbers_are_a_type_error(make):
+    with pytest.raises(TypeError, match=r"demo 1 is not an array of numbers \(a dict"):
+        make([_episode(), {"observations": _episode()}])
+    with pytest.raises(TypeError, match=r"demo 0 is not an array of numbers \(a list"):
+        make([[[0.0, 1.0], [2.0]]])  # ragged
+    # A generator of arrays is still read, its items checked as they come.
+    assert make(d for d in [_episode(), _episode(seed=1)]).obs_dim == 5
 
 
 def test_bad_config():

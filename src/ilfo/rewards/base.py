@@ -9,12 +9,14 @@ training loop is where they meet.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import os
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
 import numpy as np
 
+from ilfo.demos.npz import DemoFile, Episode
 from ilfo.ot import OTResult
 
 Atoms = Literal["transitions", "states"]
@@ -128,11 +130,65 @@ def make_atoms(states: np.ndarray, atoms: Atoms) -> np.ndarray:
     raise ValueError(f"atoms must be 'transitions' or 'states', got {atoms!r}")
 
 
+LOAD_DEMOS = (
+    "load a demonstration file with ilfo.demos.load(path) (ilfo.demos.load_any for Minari, D4RL "
+    "and imitation files) and pass [e.observations for e in demo_file.episodes]"
+)
+"""How to turn a file into what a reward takes, for the errors of ``check_demo_types``."""
+
+
+def check_demo_types(demos: object) -> None:
+    """Raise a TypeError saying what to pass where ``demos`` holds demonstrations rather than
+    being them: a file name, a ``DemoFile`` or ``Episode`` objects (numpy's own errors on them
+    name neither the problem nor the fix)."""
+    if isinstance(demos, str | bytes | os.PathLike):
+        raise TypeError(
+            f"demos must be arrays of observations (T_i + 1, obs_dim), not the file name "
+            f"{os.fsdecode(demos)!r}: {LOAD_DEMOS}"
+        )
+    if isinstance(demos, DemoFile):
+        raise TypeError(
+            "demos must be arrays of observations (T_i + 1, obs_dim), not a DemoFile: pass "
+            "[e.observations for e in demo_file.episodes]"
+        )
+    if isinstance(demos, Episode):
+        raise TypeError("demos must be a list of observation arrays: pass [episode.observations]")
+    if isinstance(demos, np.ndarray):
+        return
+    if not isinstance(demos, Iterable):
+        raise TypeError(
+            "demos must be a list of arrays of observations (T_i + 1, obs_dim), got "
+            f"{type(demos).__name__}"
+        )
+    if not isinstance(demos, Sequence):  # a generator: its items are checked as they come
+        return
+    for i, demo in enumerate(demos):
+        if isinstance(demo, Episode):
+            raise TypeError(
+                f"demo {i} is an Episode, not an array: pass [e.observations for e in episodes]"
+            )
+        if isinstance(demo, str | bytes | os.PathLike | DemoFile):
+            raise TypeError(
+                f"demo {i} is a {type(demo).__name__}, not an array of observations: {LOAD_DEMOS}"
+            )
+
+
 def check_demos(demos: Sequence[np.ndarray]) -> list[np.ndarray]:
-    """Validate expert demonstrations: a non-empty list of finite (T_i + 1, obs_dim) arrays."""
+    """Validate expert demonstrations: a non-empty list of finite (T_i + 1, obs_dim) arrays.
+    A TypeError says what to pass for a file name, a ``DemoFile`` or ``Episode`` objects."""
+    check_demo_types(demos)
     if isinstance(demos, np.ndarray):
         demos = [demos] if demos.ndim == 2 else list(demos)
-    demos = [np.asarray(d, dtype=np.float64) for d in demos]
+    arrays = []
+    for i, demo in enumerate(demos):
+        try:
+            arrays.append(np.asarray(demo, dtype=np.float64))
+        except (TypeError, ValueError) as err:  # a dict, a ragged list, a str inside a list
+            raise TypeError(
+                f"demo {i} is not an array of numbers (a {type(demo).__name__}: {err}); each "
+                "demo is one episode's observations, an array (T_i + 1, obs_dim)"
+            ) from None
+    demos = arrays
     if not demos:
         raise ValueError("at least one expert demonstration is needed")
     for i, demo in enumerate(demos):

@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ilfo.replay import ReplayData, sample_batch
-from ilfo.rewards.base import check_demos
+from ilfo.rewards.base import check_demo_types, check_demos
 
 
 class Transitions(NamedTuple):
@@ -39,6 +39,7 @@ def expert_transitions(demos: Sequence[np.ndarray], min_count: int = 1) -> Trans
     they hold fewer than ``min_count`` transitions (a batch size), a demo has fewer than two
     observations (no transition) or NaN or inf, or the demos' observation dimensions differ.
     """
+    check_demo_types(demos)  # a file name or a DemoFile: say what to pass
     if isinstance(demos, np.ndarray) and demos.ndim == 2:
         demos = [demos]  # one demo, as check_demos takes it
     if len(demos) == 0:

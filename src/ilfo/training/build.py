@@ -26,7 +26,7 @@ from ilfo.algos import AGENT_PARTS, REWARD_PARTS, LearnedRewardPart, RewardPart
 from ilfo.composition.learned import LearnedRewardSetup
 from ilfo.envs import make_env, match_observation_width, with_time_feature
 from ilfo.files import file_sha256
-from ilfo.paths import DATA_DIR
+from ilfo.paths import default_demos_path
 from ilfo.rewards import OOPS, EpisodeReward, expert_transitions
 from ilfo.training.config import TrainConfig
 from ilfo.training.resources import check_memory
@@ -174,11 +174,6 @@ def load_demo_set(config: TrainConfig, obs_dim: int) -> DemoSet:
     path = demos_path(config)
     source = DemoSource(str(path.resolve()), file_sha256(path), len(episodes), mean)
     return DemoSet(observations, mean, OOPS(observations[:1]), source)
-
-
-def default_demos_path(env_id: str) -> Path:
-    """The shipped expert demos of ``env_id``."""
-    return DATA_DIR / "experts" / env_id / "demos.npz"
 
 
 def demos_path(config: TrainConfig) -> Path:
