@@ -8,7 +8,8 @@ import pytest
 
 from ilfo.cli import main
 from ilfo.training import TrainConfig, Trainer
-from test_train import TINY, _metrics, _train
+from tiny_run import TINY_RUN as TINY_RUN
+from tiny_run import metrics_rows, train_tiny
 
 SIL_TINY = dict(
     algo="sil",
@@ -24,8 +25,8 @@ OOPS_ADV_TINY = dict(
 
 
 def test_sil_learns_once_per_batch_deterministically_and_resumes_mid_batch(tmp_path):
-    full = _metrics(_train(tmp_path, "full", **SIL_TINY))
-    assert full == _metrics(_train(tmp_path, "again", **SIL_TINY))
+    full = metrics_rows(train_tiny(tmp_path, "full", **SIL_TINY))
+    assert full == metrics_rows(train_tiny(tmp_path, "again", **SIL_TINY))
     # No random phase: TRPO acts from the first step; 100-step episodes, a batch of 200 steps:
     # the agent and the critic learn after every second episode, and only then.
     learned = [int(r["step"]) for r in full if r["critic_loss"]]
@@ -33,10 +34,10 @@ def test_sil_learns_once_per_batch_deterministically_and_resumes_mid_batch(tmp_p
     assert [int(r["step"]) for r in full if r["reward_loss"]] == learned
     assert all(float(r["proxy_return"]) != 0 for r in full)
     # Stopped after 300 steps: half a batch pending (in the buffer and in the critic's state).
-    run = _train(tmp_path, "resumed", **{**SIL_TINY, "steps": 300})
+    run = train_tiny(tmp_path, "resumed", **{**SIL_TINY, "steps": 300})
     trainer = Trainer.resume(run, progress=False, steps=600)
     assert trainer.step == 300
-    assert _metrics(trainer.train()) == full
+    assert metrics_rows(trainer.train()) == full
 
 
 def test_an_on_policy_policy_is_evaluated_again_only_after_it_learns(tmp_path):
@@ -51,9 +52,9 @@ def test_an_on_policy_policy_is_evaluated_again_only_after_it_learns(tmp_path):
             return super().timed(piece)
 
     hooks = CountEvaluations()
-    config = TrainConfig(**{**TINY, **SIL_TINY, "steps": 600, "eval_every": 100})
+    config = TrainConfig(**{**TINY_RUN, **SIL_TINY, "steps": 600, "eval_every": 100})
     run = Trainer(config, tmp_path / "run", progress=False, hooks=hooks).train()
-    rows = _metrics(run)
+    rows = metrics_rows(run)
     assert all(r["eval_score"] for r in rows)  # every episode's row has its evaluation
     # Learns at 200, 400 and 600: evaluated at 100 (the first), 200, 400 and 600 only; the
     # rows between repeat the last evaluation of the same policy.
@@ -63,18 +64,18 @@ def test_an_on_policy_policy_is_evaluated_again_only_after_it_learns(tmp_path):
 
 
 def test_oops_adv_trains_deterministically_and_resume_equals_uninterrupted(tmp_path):
-    full = _metrics(_train(tmp_path, "full", **OOPS_ADV_TINY))
-    assert full == _metrics(_train(tmp_path, "again", **OOPS_ADV_TINY))
+    full = metrics_rows(train_tiny(tmp_path, "full", **OOPS_ADV_TINY))
+    assert full == metrics_rows(train_tiny(tmp_path, "again", **OOPS_ADV_TINY))
     assert all(float(r["proxy_return"]) < 0 for r in full)  # minus a transported cost
-    run = _train(tmp_path, "resumed", **{**OOPS_ADV_TINY, "steps": 300})
+    run = train_tiny(tmp_path, "resumed", **{**OOPS_ADV_TINY, "steps": 300})
     trainer = Trainer.resume(run, progress=False, steps=600)
-    assert _metrics(trainer.train()) == full
+    assert metrics_rows(trainer.train()) == full
 
 
 def test_oops_adv_reward_differs_from_oops_with_a_fixed_cosine_cost(tmp_path):
-    adv = _metrics(_train(tmp_path, "adv", **{**OOPS_ADV_TINY, "steps": 200}))
-    cos = _metrics(
-        _train(
+    adv = metrics_rows(train_tiny(tmp_path, "adv", **{**OOPS_ADV_TINY, "steps": 200}))
+    cos = metrics_rows(
+        train_tiny(
             tmp_path,
             "cos",
             algo="oops-td3",
@@ -87,7 +88,7 @@ def test_oops_adv_reward_differs_from_oops_with_a_fixed_cosine_cost(tmp_path):
 
 
 def test_sil_flags_reach_config_json_and_the_policy_reads_back(tmp_path, capsys):
-    args = ["train", "--algo", "sil", "--env", "Hopper-v5", "--demos", TINY["demos"]]
+    args = ["train", "--algo", "sil", "--env", "Hopper-v5", "--demos", TINY_RUN["demos"]]
     args += ["--horizon", "50", "--steps", "100", "--eval-every", "100", "--eval-episodes", "1"]
     args += ["--out", str(tmp_path), "--no-progress", "--trpo-batch-steps", "100"]
     args += ["--trpo-hidden", "16", "16", "--sil-critic-lr", "0.001", "--sil-expert-subsample", "4"]
@@ -108,7 +109,7 @@ def test_sil_trains_on_standard_episodes_by_default_and_learns_per_batch(tmp_pat
     assert not TrainConfig(algo="sil").uses_fixed_horizon  # the authors' code: falls end them
     assert TrainConfig(algo="oops-adv-td3").uses_fixed_horizon  # ilfo's imitation protocol
     standard = {k: v for k, v in SIL_TINY.items() if k != "fixed_horizon"}
-    rows = _metrics(_train(tmp_path, "run", **{**standard, "steps": 400}))
+    rows = metrics_rows(train_tiny(tmp_path, "run", **{**standard, "steps": 400}))
     # A random Hopper falls within tens of steps: episodes end there, and a batch is whole
     # episodes of at least 200 steps.
     assert int(rows[0]["step"]) < 100

@@ -16,7 +16,7 @@ from ilfo.cli import main
 from ilfo.evaluate import evaluate_run
 from ilfo.paths import bundled_demos
 from ilfo.training import Trainer, load_run_policy
-from test_train import _metrics
+from tiny_run import metrics_rows
 
 FIXTURES = Path(__file__).parent / "fixtures"
 
@@ -43,7 +43,7 @@ def test_a_run_of_an_earlier_version_evaluates_and_resumes_to_its_uninterrupted_
     trainer = Trainer.resume(run, progress=False, steps=600)
     assert trainer.step == 400
     assert not (run / "checkpoints" / "latest").exists()  # the old pointer, not needed now
-    resumed = _metrics(trainer.train())
+    resumed = metrics_rows(trainer.train())
     with (FIXTURES / "run_2eddc1d_metrics_to_600.csv").open() as f:
         reference = list(csv.DictReader(f))
     for row in reference:

@@ -13,7 +13,8 @@ from ilfo.composition.learned import LearnedRewardSetup, RewardSchedule, with_le
 from ilfo.replay import ReplayData
 from ilfo.rewards import Discriminator, DiscriminatorConfig, expert_transitions
 from ilfo.training import Trainer
-from test_train import TINY, _metrics, _train
+from tiny_run import TINY_RUN as TINY_RUN
+from tiny_run import metrics_rows, train_tiny
 
 SMALL_DISC = {"update_every": 50, "updates": 2, "batch_size": 32, "hidden": (32, 32)}
 
@@ -89,22 +90,22 @@ GAIFO = dict(algo="gaifo-td3", discriminator=SMALL_DISC, td3={"actor_hidden": (3
 
 
 def test_gaifo_td3_trains_deterministically_and_resume_equals_uninterrupted(tmp_path):
-    full = _metrics(_train(tmp_path, "full", **GAIFO))
-    assert full == _metrics(_train(tmp_path, "again", **GAIFO))
+    full = metrics_rows(train_tiny(tmp_path, "full", **GAIFO))
+    assert full == metrics_rows(train_tiny(tmp_path, "again", **GAIFO))
     learned_rows = [r for r in full if r["reward_loss"]]
     # Logged as a fraction of a batch (a sum, or a NaN, would leave [0, 1]); this tiny run is
     # too short for the discriminator to beat a coin, which test_discriminator.py tests.
     accuracies = [float(r["reward_accuracy"]) for r in learned_rows]
     assert learned_rows and all(0.0 <= a <= 1.0 for a in accuracies)
     assert all(float(r["proxy_return"]) > 0 for r in full)  # -log(1 - D) > 0
-    run = _train(tmp_path, "resumed", **{**GAIFO, "steps": 300})
+    run = train_tiny(tmp_path, "resumed", **{**GAIFO, "steps": 300})
     trainer = Trainer.resume(run, progress=False, steps=600)
     assert trainer.step == 300
-    assert _metrics(trainer.train()) == full
+    assert metrics_rows(trainer.train()) == full
 
 
 def test_gaifo_td3_defaults_to_the_authors_td3_and_flags_reach_config_json(tmp_path, capsys):
-    args = ["train", "--algo", "gaifo-td3", "--env", "Hopper-v5", "--demos", TINY["demos"]]
+    args = ["train", "--algo", "gaifo-td3", "--env", "Hopper-v5", "--demos", TINY_RUN["demos"]]
     args += ["--horizon", "50", "--steps", "100", "--start-steps", "100", "--eval-every", "100"]
     args += ["--eval-episodes", "1", "--out", str(tmp_path), "--no-progress"]
     args += ["--discriminator-lr", "0.001", "--discriminator-batch-size", "16"]
@@ -125,7 +126,7 @@ def test_gaifo_td3_defaults_to_the_authors_td3_and_flags_reach_config_json(tmp_p
 def test_too_few_demo_transitions_for_a_batch_is_a_clear_error(tmp_path):
     from ilfo.training import TrainConfig
 
-    config = TrainConfig(**{**TINY, **GAIFO, "discriminator": {"batch_size": 100_000}})
+    config = TrainConfig(**{**TINY_RUN, **GAIFO, "discriminator": {"batch_size": 100_000}})
     with pytest.raises(ValueError, match="fewer than a batch of 100000"):
         Trainer(config, tmp_path / "run", progress=False)
 
@@ -146,13 +147,13 @@ FIRL_TINY = dict(
 
 
 def test_firl_trains_deterministically_and_resume_equals_uninterrupted(tmp_path):
-    full = _metrics(_train(tmp_path, "full", **FIRL_TINY))
-    assert full == _metrics(_train(tmp_path, "again", **FIRL_TINY))
+    full = metrics_rows(train_tiny(tmp_path, "full", **FIRL_TINY))
+    assert full == metrics_rows(train_tiny(tmp_path, "again", **FIRL_TINY))
     # The reward learns once per 200 steps (600 steps: three times), from fresh rollouts.
     assert sum(bool(r["reward_loss"]) for r in full) == 3
-    run = _train(tmp_path, "resumed", **{**FIRL_TINY, "steps": 300})
+    run = train_tiny(tmp_path, "resumed", **{**FIRL_TINY, "steps": 300})
     trainer = Trainer.resume(run, progress=False, steps=600)
-    assert _metrics(trainer.train()) == full
+    assert metrics_rows(trainer.train()) == full
 
 
 def test_firl_defaults_follow_the_authors():
@@ -203,7 +204,7 @@ def test_learned_rewards_see_the_demos_up_to_the_horizon(tmp_path, monkeypatch):
         return LearnedRewardSetup(**kwargs)
 
     monkeypatch.setattr(build, "LearnedRewardSetup", capture)
-    config = TrainConfig(**{**TINY, **GAIFO, "num_demos": 2})
+    config = TrainConfig(**{**TINY_RUN, **GAIFO, "num_demos": 2})
     trainer = Trainer(config, tmp_path / "run", progress=False)
     assert all(len(d) > 101 for d in trainer.demos)  # longer than the horizon
     assert seen["expert_agent_obs"].shape[0] == len(seen["expert"].obs) == 2 * 100

@@ -27,12 +27,13 @@ from ilfo.training.run_dir import (
     results_past_first_checkpoint,
     snapshot_run,
 )
-from test_train import DEMOS, TINY, _metrics, _train
+from tiny_run import DEMOS, metrics_rows, train_tiny
+from tiny_run import TINY_RUN as TINY_RUN
 
 
 def _cli_args(out, steps=600, **extra):
     args = ["train", "--no-progress", "--out", str(out), "--steps", str(steps)]
-    for key, value in {**TINY, **extra}.items():
+    for key, value in {**TINY_RUN, **extra}.items():
         args += [f"--{key.replace('_', '-')}", str(value)]
     return args
 
@@ -64,32 +65,32 @@ def test_cli_runs_started_in_the_same_second_write_their_own_directories(tmp_pat
     assert main(_cli_args(tmp_path, steps=200)) == 0
     assert main(_cli_args(tmp_path, steps=200, oops_reg=0.1)) == 0
     first, second = tmp_path / "same-name", tmp_path / "same-name-2"
-    assert [int(r["step"]) for r in _metrics(first)] == [100, 200]
-    assert [int(r["step"]) for r in _metrics(second)] == [100, 200]
+    assert [int(r["step"]) for r in metrics_rows(first)] == [100, 200]
+    assert [int(r["step"]) for r in metrics_rows(second)] == [100, 200]
     assert json.loads((second / "config.json").read_text())["oops"]["reg"] == 0.1
     assert json.loads((first / "config.json").read_text())["oops"]["reg"] == 0.05
 
 
 def test_a_run_refuses_a_directory_another_process_writes(tmp_path):
-    run = _train(tmp_path, "run", steps=200)
-    before = (run / "config.json").read_bytes(), _metrics(run)
+    run = train_tiny(tmp_path, "run", steps=200)
+    before = (run / "config.json").read_bytes(), metrics_rows(run)
     with RunLock(run):  # as another process resuming it would hold it
         with pytest.raises(RunDirInUse, match="in use by another run"):
             Trainer.resume(run, progress=False, steps=400)
-        config = TrainConfig(**{**TINY, "steps": 200})
+        config = TrainConfig(**{**TINY_RUN, "steps": 200})
         with pytest.raises(RunDirInUse):
             Trainer(config, run, progress=False).train()
-    assert ((run / "config.json").read_bytes(), _metrics(run)) == before
+    assert ((run / "config.json").read_bytes(), metrics_rows(run)) == before
     # Unlocked, a fresh run still may not write into a directory that holds a run.
     with pytest.raises(ValueError, match="holds a run already"):
-        Trainer(TrainConfig(**{**TINY, "steps": 200}), run, progress=False).train()
+        Trainer(TrainConfig(**{**TINY_RUN, "steps": 200}), run, progress=False).train()
     assert Trainer.resume(run, progress=False, steps=300).train() == run  # the lock was freed
 
 
 # ----------------------------------------------------------------------------------- resume
 def test_resume_finds_the_newest_complete_checkpoint_and_removes_leftovers(tmp_path):
-    full = _metrics(_train(tmp_path, "full", steps=400))
-    run = _train(tmp_path, "run", steps=300, checkpoint_every=100)
+    full = metrics_rows(train_tiny(tmp_path, "full", steps=400))
+    run = train_tiny(tmp_path, "run", steps=300, checkpoint_every=100)
     root = run / "checkpoints"
     assert [p.name for p in root.iterdir()] == ["step_000000300"]  # older ones removed
     # What kills at other moments leave: a half-written checkpoint, a stale pointer of an older
@@ -104,29 +105,29 @@ def test_resume_finds_the_newest_complete_checkpoint_and_removes_leftovers(tmp_p
     assert trainer.step == 300
     assert not (root / ".tmp_step_000000400").exists() and not (root / "latest").exists()
     assert not (root / "step_000000200").exists()
-    assert _metrics(trainer.train()) == full
+    assert metrics_rows(trainer.train()) == full
 
 
 def test_a_newest_checkpoint_missing_files_is_refused_with_the_repair_not_skipped(tmp_path):
     """Checkpoints are renamed into place once written, so a newest one missing a file had it
     removed (replay.npz, to free disk): resuming from an older one or from step 0 would drop
     the steps and metrics logged since. Resume and snapshot say what is missing and how to go on."""
-    full = _metrics(_train(tmp_path, "full", steps=400))
-    run = _train(tmp_path, "run", steps=300, checkpoint_every=100)
+    full = metrics_rows(train_tiny(tmp_path, "full", steps=400))
+    run = train_tiny(tmp_path, "run", steps=300, checkpoint_every=100)
     newest = run / "checkpoints" / "step_000000300"
     (newest / "replay.npz").unlink()
-    rows = _metrics(run)
+    rows = metrics_rows(run)
     for attempt in (
         lambda: Trainer.resume(run, progress=False, steps=400),
         lambda: snapshot_run(run, tmp_path / "snap"),
     ):
         with pytest.raises(FileNotFoundError, match=r"has no replay.npz .*touch .*replay.omitted"):
             attempt()
-    assert _metrics(run) == rows and not (tmp_path / "snap").exists()  # nothing changed
+    assert metrics_rows(run) == rows and not (tmp_path / "snap").exists()  # nothing changed
     (newest / "replay.omitted").write_text("{}")  # the repair the message gives
     with pytest.warns(UserWarning, match="buffer is refilled"):
         trainer = Trainer.resume(run, progress=False, steps=400)
-    assert trainer.step == 300 and [r["step"] for r in _metrics(trainer.train())] == [
+    assert trainer.step == 300 and [r["step"] for r in metrics_rows(trainer.train())] == [
         r["step"] for r in full
     ]
     (run / "checkpoints" / "step_000000400" / "state.json").unlink()
@@ -146,26 +147,29 @@ def test_a_run_killed_before_its_first_checkpoint_starts_again_from_zero(tmp_pat
     """Killed while writing its first checkpoint: its rows up to the one that checkpoint fell
     due at (step 200) and its best policy of that evaluation are what a start from step 0
     writes again, so it starts again, without them."""
-    full = _metrics(_train(tmp_path, "full", steps=300))
+    full = metrics_rows(train_tiny(tmp_path, "full", steps=300))
     run = tmp_path / "run"
-    trainer = Trainer(TrainConfig(**{**TINY, "steps": 300}), run, progress=False)
+    trainer = Trainer(TrainConfig(**{**TINY_RUN, "steps": 300}), run, progress=False)
     trainer.save_checkpoint = _killed
     with pytest.raises(_Killed):
         trainer.train()
-    assert latest_checkpoint(run) is None and [r["step"] for r in _metrics(run)] == ["100", "200"]
+    assert latest_checkpoint(run) is None and [r["step"] for r in metrics_rows(run)] == [
+        "100",
+        "200",
+    ]
     assert (run / "best_policy.msgpack").is_file() and not (run / "policy.msgpack").exists()
     with pytest.warns(UserWarning, match="starts again from step 0"):
         resumed = Trainer.resume(run, progress=False)
-    assert resumed.step == 0 and _metrics(run) == []
+    assert resumed.step == 0 and metrics_rows(run) == []
     assert not (run / "best_policy.msgpack").exists() and not (run / "best_policy.json").exists()
-    assert _metrics(resumed.train()) == full
+    assert metrics_rows(resumed.train()) == full
 
 
 def test_a_run_with_results_and_no_checkpoint_is_refused_and_keeps_them(tmp_path, capsys):
     """A finished run whose checkpoints were removed (to free the disk) has nothing to resume
     from: a start from step 0 would delete its metrics and policies, so resume refuses it,
     saying what it holds and how to train it again, and changes no file."""
-    run = _train(tmp_path, "run", steps=600)
+    run = train_tiny(tmp_path, "run", steps=600)
     shutil.rmtree(run / "checkpoints")
     kept = ("metrics.csv", "config.json", "policy.msgpack", "best_policy.msgpack")
     before = {name: (run / name).read_bytes() for name in kept}
@@ -194,7 +198,7 @@ def test_a_run_with_results_and_no_checkpoint_is_refused_and_keeps_them(tmp_path
     argv = ["train", "--no-progress", "--config", str(run / "config.json")]
     assert main([*argv, "--out", str(tmp_path / "again"), "--steps", "200"]) == 0
     (again,) = (tmp_path / "again").iterdir()
-    assert json.loads((again / "config.json").read_text())["eval_every"] == TINY["eval_every"]
+    assert json.loads((again / "config.json").read_text())["eval_every"] == TINY_RUN["eval_every"]
 
 
 def _write_rows(run, rows):
@@ -205,7 +209,7 @@ def _write_rows(run, rows):
 def test_results_past_the_first_checkpoint_are_read_off_the_rows_policies_and_clock(tmp_path):
     run = tmp_path / "run"
     run.mkdir()
-    by_steps = TrainConfig(**{**TINY, "steps": 600})  # the first checkpoint falls due at 200
+    by_steps = TrainConfig(**{**TINY_RUN, "steps": 600})  # the first checkpoint falls due at 200
     assert results_past_first_checkpoint(run, by_steps) is None  # nothing logged yet
     _write_rows(run, [(100, 0.1), (200, 0.2)])  # killed while checkpointing at 200
     assert results_past_first_checkpoint(run, by_steps) is None
@@ -216,7 +220,7 @@ def test_results_past_the_first_checkpoint_are_read_off_the_rows_policies_and_cl
     _write_rows(run, [(100, 0.1), (200, 0.2), (300, 0.3)])
     assert results_past_first_checkpoint(run, by_steps) == "3 metrics rows to step 300"
     # By the clock (checkpoint_minutes: 1 s here), as the loop checkpoints by it.
-    by_clock = TrainConfig(**{**TINY, "steps": 600, "checkpoint_every": 10**6,
+    by_clock = TrainConfig(**{**TINY_RUN, "steps": 600, "checkpoint_every": 10**6,
                               "checkpoint_minutes": 1 / 60})  # fmt: skip
     assert results_past_first_checkpoint(run, by_clock) is None  # 0.3 s: none due yet
     _write_rows(run, [(100, 0.5), (200, 2.5)])
@@ -245,21 +249,21 @@ def test_checkpoints_follow_the_clock_as_well_as_the_steps(tmp_path, monkeypatch
 
     monkeypatch.setattr(Trainer, "save_checkpoint", record)
     huge = 10**9
-    _train(tmp_path, "clock", steps=300, checkpoint_every=huge, checkpoint_minutes=1e-9)
+    train_tiny(tmp_path, "clock", steps=300, checkpoint_every=huge, checkpoint_minutes=1e-9)
     assert saved == [100, 200, 300]  # each episode took longer than the clock's interval
     saved.clear()
-    _train(tmp_path, "steps_only", steps=300, checkpoint_every=huge, checkpoint_minutes=0)
+    train_tiny(tmp_path, "steps_only", steps=300, checkpoint_every=huge, checkpoint_minutes=0)
     assert saved == [300]  # the end of the run only
     assert TrainConfig().checkpoint_minutes == 10.0
-    plan = Trainer(TrainConfig(**TINY), tmp_path / "p", progress=False).checkpoint_plan()
+    plan = Trainer(TrainConfig(**TINY_RUN), tmp_path / "p", progress=False).checkpoint_plan()
     assert "every 200 steps and every 10 min" in plan and str(tmp_path / "p") in plan
     for bad in (-1, float("nan"), "10", True):
         with pytest.raises(ValueError, match="checkpoint_minutes"):
-            TrainConfig(**{**TINY, "checkpoint_minutes": bad})
+            TrainConfig(**{**TINY_RUN, "checkpoint_minutes": bad})
 
 
 def test_resume_with_steps_writes_config_only_after_loading_and_refuses_to_shorten(tmp_path):
-    run = _train(tmp_path, "run", steps=300)
+    run = train_tiny(tmp_path, "run", steps=300)
     config_bytes = (run / "config.json").read_bytes()
     with pytest.raises(ValueError, match="has done 300 steps already"):
         Trainer.resume(run, progress=False, steps=200)
@@ -295,7 +299,7 @@ def _tensorboard_steps(run_dir, tag="proxy_return"):
 
 @pytest.fixture(scope="module")
 def uninterrupted(tmp_path_factory):
-    return _metrics(_train(tmp_path_factory.mktemp("reference"), "full"))
+    return metrics_rows(train_tiny(tmp_path_factory.mktemp("reference"), "full"))
 
 
 @pytest.mark.parametrize(
@@ -321,7 +325,7 @@ def test_a_run_killed_at_any_moment_resumes_to_the_uninterrupted_numbers(
     assert done.returncode == -9, done.stderr  # SIGKILL, as an OOM kill or a crash
     (run,) = list((tmp_path / "runs").iterdir())
     trainer = Trainer.resume(run, progress=False)
-    assert _metrics(trainer.train()) == uninterrupted
+    assert metrics_rows(trainer.train()) == uninterrupted
     assert _tensorboard_steps(run) == [int(r["step"]) for r in uninterrupted]
 
 
@@ -335,7 +339,7 @@ def _cli_error(capsys, argv, code=2):
 
 
 def test_damaged_run_files_are_clear_errors_that_name_the_file(tmp_path, capsys):
-    run = _train(tmp_path, "run", steps=200)
+    run = train_tiny(tmp_path, "run", steps=200)
     config, policy = run / "config.json", run / "policy.msgpack"
     good_config, good_policy = config.read_bytes(), policy.read_bytes()
 
@@ -406,7 +410,7 @@ def test_a_checkpoint_is_on_the_disk_before_its_rename_and_before_older_ones_go(
     monkeypatch.setattr(os, "fsync", record_fsync)
     monkeypatch.setattr(os, "replace", record_replace)
     monkeypatch.setattr(shutil, "rmtree", record_rmtree)
-    run = _train(tmp_path, "run", steps=200, checkpoint_every=100)
+    run = train_tiny(tmp_path, "run", steps=200, checkpoint_every=100)
     root = run / "checkpoints"
     final = root / "step_000000200"
     tmp = root / ".tmp_step_000000200"
@@ -425,7 +429,7 @@ def test_a_full_disk_during_a_checkpoint_is_one_line_and_keeps_what_was_written(
 ):
     from ilfo.replay import ReplayBuffer
 
-    full = _metrics(_train(tmp_path, "full", steps=600))
+    full = metrics_rows(train_tiny(tmp_path, "full", steps=600))
     original, calls = ReplayBuffer.save, []
 
     def save(self, path):
@@ -440,7 +444,7 @@ def test_a_full_disk_during_a_checkpoint_is_one_line_and_keeps_what_was_written(
     monkeypatch.setattr(ReplayBuffer, "save", original)
     (run,) = list((tmp_path / "runs").iterdir())
     assert latest_checkpoint(run).name == "step_000000200"
-    assert _metrics(Trainer.resume(run, progress=False).train()) == full
+    assert metrics_rows(Trainer.resume(run, progress=False).train()) == full
 
 
 def test_the_resume_hint_is_a_command_the_user_can_run(monkeypatch, tmp_path):
@@ -526,11 +530,11 @@ def test_every_bad_demo_file_is_a_clear_error_on_every_path(tmp_path, capsys):
             assert str(path) in str(caught.value), name
             assert "allow_pickle" not in str(caught.value), name
         with pytest.raises(ValueError, match=str(path)):  # ilfo train's path
-            load_demos(TrainConfig(**{**TINY, "demos": str(path)}))
+            load_demos(TrainConfig(**{**TINY_RUN, "demos": str(path)}))
         err = _cli_error(capsys, ["demos", "info", str(path)])
         assert str(path) in err, name
     with pytest.raises(ValueError, match="holds demos of Hopper-v5, not Walker2d-v5"):
-        load_demos(TrainConfig(**{**TINY, "demos": str(valid), "env": "Walker2d-v5"}))
+        load_demos(TrainConfig(**{**TINY_RUN, "demos": str(valid), "env": "Walker2d-v5"}))
 
 
 def test_sinkhorn_refuses_costs_beyond_float64_instead_of_returning_nan():
@@ -550,7 +554,7 @@ def test_sinkhorn_refuses_costs_beyond_float64_instead_of_returning_nan():
 
 
 def test_a_snapshot_leaves_the_buffer_out_and_resumes_after_refilling_it(tmp_path, capsys):
-    run = _train(tmp_path, "run", steps=400)  # checkpoints at 200 and 400
+    run = train_tiny(tmp_path, "run", steps=400)  # checkpoints at 200 and 400
     out = tmp_path / "carried"
     assert main(["snapshot", str(run), str(out)]) == 0
     assert "MiB" in capsys.readouterr().out
@@ -568,7 +572,7 @@ def test_a_snapshot_leaves_the_buffer_out_and_resumes_after_refilling_it(tmp_pat
     with pytest.warns(UserWarning, match="refilled by 200 steps"):
         trainer = Trainer.resume(out, progress=False, steps=800)
     assert trainer.step == 400 and trainer.buffer.size == 0
-    rows = _metrics(trainer.train())
+    rows = metrics_rows(trainer.train())
     by_step = {int(r["step"]): r for r in rows}
     # Steps 400-600 refill the buffer with the policy's own episodes (no updates), then
     # updates resume; every step is logged once.
@@ -582,7 +586,7 @@ def test_a_snapshot_leaves_the_buffer_out_and_resumes_after_refilling_it(tmp_pat
 
 
 def test_a_snapshot_taken_mid_refill_keeps_refilling(tmp_path):
-    run = _train(tmp_path, "run", steps=400)
+    run = train_tiny(tmp_path, "run", steps=400)
     out = tmp_path / "carried"
     from ilfo.training.run_dir import snapshot_run
 
@@ -596,7 +600,7 @@ def test_a_snapshot_taken_mid_refill_keeps_refilling(tmp_path):
     trainer.train()  # stops at 500, inside the refill (it lasts to 600)
     resumed = Trainer.resume(out, progress=False, steps=700)
     assert resumed.step == 500 and resumed.refill_until == 600
-    rows = {int(r["step"]): r for r in _metrics(resumed.train())}
+    rows = {int(r["step"]): r for r in metrics_rows(resumed.train())}
     assert not rows[600]["critic_loss"] and rows[700]["critic_loss"]
 
 
@@ -607,8 +611,8 @@ def test_an_on_policy_run_continues_exactly_from_a_snapshot(tmp_path):
 
     sil = dict(algo="sil", trpo={"hidden": (16, 16), "batch_steps": 200, "value_iters": 5},
                sil={"critic_hidden": (16, 16), "critic_features": 8})  # fmt: skip
-    full = _train(tmp_path, "full", steps=500, **sil)
-    run = _train(tmp_path, "run", steps=300, **sil)  # its checkpoint at 300, mid-batch
+    full = train_tiny(tmp_path, "full", steps=500, **sil)
+    run = train_tiny(tmp_path, "run", steps=300, **sil)  # its checkpoint at 300, mid-batch
     out = snapshot_run(run, tmp_path / "carried")
     (ckpt,) = (out / "checkpoints").iterdir()
     assert (ckpt / "replay.npz").is_file() and not (ckpt / "replay.omitted").exists()
@@ -616,7 +620,7 @@ def test_an_on_policy_run_continues_exactly_from_a_snapshot(tmp_path):
         warnings.simplefilter("error")  # no refill: nothing to warn of
         resumed = Trainer.resume(out, progress=False, steps=500)
     assert resumed.buffer.size > 0  # the batch pending at 300 (it updates at episode ends)
-    assert _metrics(resumed.train()) == _metrics(full)
+    assert metrics_rows(resumed.train()) == metrics_rows(full)
     older = snapshot_run(run, tmp_path / "older")  # as snapshots were before they kept it
     (ckpt,) = (older / "checkpoints").iterdir()
     (ckpt / "replay.npz").unlink()

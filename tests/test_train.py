@@ -1,6 +1,5 @@
 """The training loop end to end, on tiny budgets (short horizon, fast preset)."""
 
-import csv
 import dataclasses
 import json
 import shutil
@@ -8,51 +7,20 @@ import shutil
 import numpy as np
 import pytest
 
-from ilfo.algos import ALGOS
 from ilfo.cli import main
-from ilfo.paths import bundled_demos
 from ilfo.training import TrainConfig, Trainer, load_demos
 from ilfo.training.metrics import METRIC_FIELDS
 from ilfo.training.run_dir import latest_checkpoint
-
-DEMOS = str(bundled_demos("Hopper-v5-scripted"))
-TINY = dict(
-    env="Hopper-v5",
-    demos=DEMOS,
-    horizon=100,
-    start_steps=200,
-    eval_every=200,
-    eval_episodes=1,
-    checkpoint_every=200,
-    preset="fast",
-    replay_capacity=5000,
-)
-
-
-def _metrics(run_dir):
-    with (run_dir / "metrics.csv").open() as f:
-        rows = list(csv.DictReader(f))
-    for row in rows:  # wall-clock columns differ between runs by nature
-        row.pop("wall_time")
-        row.pop("steps_per_s")
-    return rows
-
-
-def _train(tmp_path, name, **overrides):
-    settings = {**TINY, "steps": 600, **overrides}
-    if not ALGOS[settings.get("algo", "oops-td3")].imitation:
-        settings.pop("demos")  # the task reward: demos are refused
-    config = TrainConfig(**settings)
-    return Trainer(config, tmp_path / name, progress=False).train()
+from tiny_run import DEMOS, TINY_RUN, metrics_rows, train_tiny
 
 
 def test_smoke_run_writes_everything(tmp_path):
-    run = _train(tmp_path, "run")
+    run = train_tiny(tmp_path, "run")
     for name in ("config.json", "metrics.csv", "policy.msgpack", "learning_curve.png"):
         assert (run / name).is_file(), name
     assert list((run / "tb").glob("events.out.tfevents.*"))
     assert (run / "best_policy.msgpack").is_file()
-    rows = _metrics(run)
+    rows = metrics_rows(run)
     assert [int(r["step"]) for r in rows] == [100, 200, 300, 400, 500, 600]
     evals = [r for r in rows if r["eval_score"]]
     assert len(evals) == 3 and all(r["eval_ot_distance"] for r in evals)
@@ -60,36 +28,36 @@ def test_smoke_run_writes_everything(tmp_path):
 
 
 def test_same_seed_same_numbers_and_resume_equals_uninterrupted(tmp_path):
-    full = _metrics(_train(tmp_path, "full"))
-    again = _metrics(_train(tmp_path, "again"))
+    full = metrics_rows(train_tiny(tmp_path, "full"))
+    again = metrics_rows(train_tiny(tmp_path, "again"))
     assert full == again
-    _train(tmp_path, "resumed", steps=300)
+    train_tiny(tmp_path, "resumed", steps=300)
     trainer = Trainer.resume(tmp_path / "resumed", progress=False, steps=600)
     assert trainer.step == 300
-    assert _metrics(trainer.train()) == full
-    other_seed = _metrics(_train(tmp_path, "seed1", seed=1))
+    assert metrics_rows(trainer.train()) == full
+    other_seed = metrics_rows(train_tiny(tmp_path, "seed1", seed=1))
     assert other_seed != full
 
 
 def test_resume_with_oops_warm_starts_equals_uninterrupted(tmp_path):
     # Warm starts carry Sinkhorn potentials from episode to episode; a resume must restore them.
     warm = {"oops": {"warm_start": True, "tol": 1e-6}, "steps": 400}
-    full = _metrics(_train(tmp_path, "full", **warm))
-    run = _train(tmp_path, "resumed", **{**warm, "steps": 300})
+    full = metrics_rows(train_tiny(tmp_path, "full", **warm))
+    run = train_tiny(tmp_path, "resumed", **{**warm, "steps": 300})
     assert (run / "checkpoints" / "step_000000300" / "reward_arrays.npz").is_file()
-    assert _metrics(Trainer.resume(run, progress=False, steps=400).train()) == full
+    assert metrics_rows(Trainer.resume(run, progress=False, steps=400).train()) == full
 
 
 def test_resume_after_a_crash_drops_rows_logged_after_the_checkpoint(tmp_path):
-    full = _metrics(_train(tmp_path, "full", steps=400))
-    run = _train(tmp_path, "crashed", steps=300)
+    full = metrics_rows(train_tiny(tmp_path, "full", steps=400))
+    run = train_tiny(tmp_path, "crashed", steps=300)
     # A crash after step 400 was logged but before any checkpoint of it: a stale row.
     with (run / "metrics.csv").open("a") as f:  # complete: a torn row is dropped whatever its step
         f.write(",".join(["400", "4", "9.9", "1.0", "-1", "-1"] + [""] * (len(METRIC_FIELDS) - 6)))
         f.write("\n")
     trainer = Trainer.resume(run, progress=False, steps=400)
-    assert [int(r["step"]) for r in _metrics(run)] == [100, 200, 300]
-    assert _metrics(trainer.train()) == full
+    assert [int(r["step"]) for r in metrics_rows(run)] == [100, 200, 300]
+    assert metrics_rows(trainer.train()) == full
 
 
 def test_eval_of_the_final_policy_repeats_the_last_evaluation(tmp_path):
@@ -97,8 +65,8 @@ def test_eval_of_the_final_policy_repeats_the_last_evaluation(tmp_path):
     finished run's final policy scores what its last evaluation (at its last step) logged."""
     from ilfo.evaluate import evaluate_run
 
-    run = _train(tmp_path, "run", steps=400)
-    last = [r for r in _metrics(run) if r["eval_score"]][-1]
+    run = train_tiny(tmp_path, "run", steps=400)
+    last = [r for r in metrics_rows(run) if r["eval_score"]][-1]
     assert last["step"] == "400"
     result = evaluate_run(run, episodes=1)
     assert round(result["score_mean"], 3) == float(last["eval_score"])
@@ -109,7 +77,7 @@ def test_a_run_past_its_budget_resumes_and_an_extended_one_drops_its_old_final_p
     """Whole 100-step episodes take a 250-step run to 300: resuming it is no shortening (it
     only writes its final policy again); extending it removes the 300-step final policy, which
     `ilfo eval` would otherwise take for the extended run's until it ends."""
-    run = _train(tmp_path, "run", steps=250)
+    run = train_tiny(tmp_path, "run", steps=250)
     assert latest_checkpoint(run).name == "step_000000300"
     trainer = Trainer.resume(run, progress=False)
     assert trainer.step == 300 and (run / "policy.msgpack").is_file()
@@ -133,7 +101,7 @@ def test_resume_puts_back_the_checkpoints_best_policy(tmp_path):
     """A best policy written after the last checkpoint (by a later evaluation) is from a future
     the resume discards: the checkpoint's copy goes back, so that the best policy's record
     matches the metrics rows whatever the continuation does."""
-    run = _train(tmp_path, "run", steps=400)
+    run = train_tiny(tmp_path, "run", steps=400)
     young = shutil.copytree(run, tmp_path / "young")
     ckpt = latest_checkpoint(run)
     kept = {n: (ckpt / n).read_bytes() for n in ("best_policy.msgpack", "best_policy.json")}
@@ -172,15 +140,18 @@ def test_td7_same_seed_same_numbers_and_resume_equals_uninterrupted(tmp_path):
             "target_update_every": 50,
         },
     }
-    full = _metrics(_train(tmp_path, "full", **td7))
-    assert full == _metrics(_train(tmp_path, "again", **td7))
-    _train(tmp_path, "resumed", **td7, steps=300)
-    assert _metrics(Trainer.resume(tmp_path / "resumed", progress=False, steps=600).train()) == full
+    full = metrics_rows(train_tiny(tmp_path, "full", **td7))
+    assert full == metrics_rows(train_tiny(tmp_path, "again", **td7))
+    train_tiny(tmp_path, "resumed", **td7, steps=300)
+    assert (
+        metrics_rows(Trainer.resume(tmp_path / "resumed", progress=False, steps=600).train())
+        == full
+    )
 
 
 @pytest.mark.parametrize("algo", ["oops-ddpg", "oops-sac", "oops-td7", "pwil-td3", "td3", "td7"])
 def test_every_algo_runs(tmp_path, algo):
-    rows = _metrics(_train(tmp_path, algo, algo=algo, steps=300))
+    rows = metrics_rows(train_tiny(tmp_path, algo, algo=algo, steps=300))
     assert int(rows[-1]["step"]) >= 300
     evals = [r for r in rows if r["eval_score"]]
     assert evals and rows[-1]["critic_loss"]
@@ -190,7 +161,7 @@ def test_every_algo_runs(tmp_path, algo):
 
 def test_cli_train_and_eval_and_plot(tmp_path, capsys):
     args = ["train", "--no-progress", "--out", str(tmp_path), "--steps", "300"]
-    for key, value in TINY.items():
+    for key, value in TINY_RUN.items():
         args += [f"--{key.replace('_', '-')}", str(value)]
     assert main(args) == 0
     (run,) = [p for p in tmp_path.iterdir() if p.is_dir()]
@@ -230,12 +201,12 @@ def test_imitation_on_ant_drops_the_contact_forces_by_default_from_the_run_and_i
     from ilfo.experiments.distances import final_rollouts
     from ilfo.training import load_demo_set
 
-    ant = {**TINY, "env": "Ant-v5", "demos": None, "num_demos": 1}
-    run = _train(tmp_path, "ant", **ant, steps=300)
+    ant = {**TINY_RUN, "env": "Ant-v5", "demos": None, "num_demos": 1}
+    run = train_tiny(tmp_path, "ant", **ant, steps=300)
     assert json.loads((run / "config.json").read_text())["contact_forces"] is False
     demos = load_demo_set(TrainConfig(**ant), obs_dim=27)  # the shipped 105-dim demos, sliced
     assert demos.observations[0].shape == (1001, 27)
-    rows = _metrics(run)
+    rows = metrics_rows(run)
     assert len(rows) == 3 and rows[1]["eval_score"] and rows[1]["eval_ot_distance"]
     rollouts, experts = final_rollouts(run, episodes=1, experts=1)
     assert rollouts[0].observations.shape[1] == experts[0].observations.shape[1] == 27
@@ -271,7 +242,7 @@ def test_a_reward_that_did_not_converge_is_reported_once(tmp_path):
     from ilfo.rewards import OOPSConfig
 
     oops = OOPSConfig(max_iter=1, tol=1e-12, solver="sinkhorn")
-    config = TrainConfig(**{**TINY, "steps": 300, "eval_every": 300, "oops": oops})
+    config = TrainConfig(**{**TINY_RUN, "steps": 300, "eval_every": 300, "oops": oops})
     trainer = Trainer(config, tmp_path / "run", progress=False)
     with pytest.warns(UserWarning, match="sinkhorn coupling did not converge") as caught:
         trainer.train()
@@ -289,7 +260,7 @@ def test_demos_whose_return_is_zero_leave_scores_unnormalised(tmp_path):
               for e in demos.load(DEMOS).episodes[:2]]  # fmt: skip
     path = tmp_path / "d.npz"
     demos.save(path, zeroed, "Hopper-v5")
-    config = TrainConfig(**{**TINY, "demos": str(path), "num_demos": 2})
+    config = TrainConfig(**{**TINY_RUN, "demos": str(path), "num_demos": 2})
     assert np.isnan(load_demo_set(config, 11).mean_return)
 
 
@@ -301,12 +272,12 @@ def test_demos_in_which_the_expert_fell_are_named_in_a_warning(tmp_path):
     episodes = demos.load(DEMOS).episodes[:3]
     path = tmp_path / "d.npz"
     demos.save(path, episodes, "Hopper-v5", {"seeds": [4, 5, 6], "kept_seeds_with_a_fall": [5]})
-    config = TrainConfig(**{**TINY, "demos": str(path), "num_demos": 1})
+    config = TrainConfig(**{**TINY_RUN, "demos": str(path), "num_demos": 1})
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert len(load_demos(config)) == 1  # seed 4: no fall, no warning
     with pytest.warns(UserWarning, match=r"fell .* seeds \[5\]"):
-        load_demos(TrainConfig(**{**TINY, "demos": str(path), "num_demos": 3}))
+        load_demos(TrainConfig(**{**TINY_RUN, "demos": str(path), "num_demos": 3}))
 
 
 def test_a_run_records_the_demo_file_it_imitates_and_warns_if_it_changes(tmp_path):
@@ -320,7 +291,7 @@ def test_a_run_records_the_demo_file_it_imitates_and_warns_if_it_changes(tmp_pat
 
     path = tmp_path / "d.npz"
     shutil.copy(DEMOS, path)
-    run = _train(tmp_path, "run", demos=str(path), num_demos=2, steps=200)
+    run = train_tiny(tmp_path, "run", demos=str(path), num_demos=2, steps=200)
     record = json.loads((run / "demos.json").read_text())
     first_sha = hashlib.sha256(path.read_bytes()).hexdigest()
     assert record["sha256"] == first_sha and record["path"] == str(path.resolve())
@@ -343,7 +314,7 @@ def test_a_run_records_the_demo_file_it_imitates_and_warns_if_it_changes(tmp_pat
     record = json.loads((run / "demos.json").read_text())
     assert record["since_step"] == 200 and record["sha256"] != first_sha
 
-    task_reward = _train(tmp_path, "td3", algo="td3", steps=200)
+    task_reward = train_tiny(tmp_path, "td3", algo="td3", steps=200)
     assert not (task_reward / "demos.json").exists()
 
 
@@ -404,7 +375,7 @@ def test_cli_errors(tmp_path, capsys):
 
 def test_cli_agent_and_rewarder_flags_reach_config_json_and_resume(tmp_path, capsys):
     args = ["train", "--no-progress", "--out", str(tmp_path), "--steps", "300"]
-    for key, value in TINY.items():
+    for key, value in TINY_RUN.items():
         args += [f"--{key.replace('_', '-')}", str(value)]
     args += ["--td3-batch-size", "32", "--td3-critic-hidden", "64", "64"]
     args += ["--td3-critic-grad-clip", "none", "--oops-reg", "0.1", "--seed", "2"]
@@ -422,7 +393,7 @@ def test_cli_agent_and_rewarder_flags_reach_config_json_and_resume(tmp_path, cap
     assert config.td3.critic_hidden == (64, 64) and config.oops.reg == 0.1
 
     assert main(["train", "--resume", str(run), "--steps", "400", "--no-progress"]) == 0
-    assert int(_metrics(run)[-1]["step"]) == 400
+    assert int(metrics_rows(run)[-1]["step"]) == 400
     resaved = json.loads((run / "config.json").read_text())
     assert resaved == {**saved, "steps": 400}
     capsys.readouterr()
@@ -456,8 +427,8 @@ def test_ctrl_c_mid_episode_finishes_the_episode_checkpoints_and_resumes_exactly
             if trainer.episode == 3:
                 os.kill(os.getpid(), signal.SIGINT)
 
-    full = _metrics(_train(tmp_path, "full"))
-    config = TrainConfig(**{**TINY, "steps": 600})
+    full = metrics_rows(train_tiny(tmp_path, "full"))
+    config = TrainConfig(**{**TINY_RUN, "steps": 600})
     hooks = InterruptInEpisode3()
     trainer = Trainer(config, tmp_path / "interrupted", progress=False, hooks=hooks)
     with pytest.raises(KeyboardInterrupt):
@@ -466,7 +437,7 @@ def test_ctrl_c_mid_episode_finishes_the_episode_checkpoints_and_resumes_exactly
     assert latest_checkpoint(run).name == "step_000000300"
     resumed = Trainer.resume(run, progress=False)
     assert resumed.step == 300
-    assert _metrics(resumed.train()) == full
+    assert metrics_rows(resumed.train()) == full
 
 
 def test_network_normalizer_weighs_expert_and_random_states_alike_as_the_paper_code():
@@ -491,7 +462,7 @@ def test_network_normalizer_weighs_expert_and_random_states_alike_as_the_paper_c
 
 @pytest.mark.parametrize("updates_per_step", [1, 3])
 def test_updates_per_step_sets_the_update_count(tmp_path, updates_per_step):
-    config = TrainConfig(**{**TINY, "steps": 400, "updates_per_step": updates_per_step})
+    config = TrainConfig(**{**TINY_RUN, "steps": 400, "updates_per_step": updates_per_step})
     trainer = Trainer(config, tmp_path / "run", progress=False)
     trainer.train()
     # Updates follow every episode collected by the policy (steps 200-400), none the random ones.
@@ -500,15 +471,15 @@ def test_updates_per_step_sets_the_update_count(tmp_path, updates_per_step):
 
 def test_updates_per_step_below_one_is_an_error():
     with pytest.raises(ValueError, match="updates_per_step must be >= 1"):
-        TrainConfig(**{**TINY, "updates_per_step": 0})
+        TrainConfig(**{**TINY_RUN, "updates_per_step": 0})
     # On-policy TRPO (sil) learns once per batch: more updates per step would be ignored.
     with pytest.raises(ValueError, match="updates_per_step does not apply to algo 'sil'"):
-        TrainConfig(**{**TINY, "algo": "sil", "updates_per_step": 4})
-    assert TrainConfig(**{**TINY, "algo": "sil"}).updates_per_step == 1
+        TrainConfig(**{**TINY_RUN, "algo": "sil", "updates_per_step": 4})
+    assert TrainConfig(**{**TINY_RUN, "algo": "sil"}).updates_per_step == 1
 
 
 def test_a_replay_buffer_smaller_than_an_episode_is_refused_at_the_start(tmp_path):
-    config = TrainConfig(**{**TINY, "replay_capacity": 99})  # the horizon is 100
+    config = TrainConfig(**{**TINY_RUN, "replay_capacity": 99})  # the horizon is 100
     with pytest.raises(ValueError, match=r"replay_capacity .* at least the horizon, 100; got 99"):
         Trainer(config, tmp_path / "run", progress=False)
 
@@ -525,7 +496,7 @@ def test_a_replay_buffer_smaller_than_an_episode_is_refused_at_the_start(tmp_pat
 )
 def test_counts_that_are_not_integers_are_an_error(field, value):
     with pytest.raises(ValueError, match=f"{field} must be an integer"):
-        TrainConfig(**{**TINY, field: value})
+        TrainConfig(**{**TINY_RUN, field: value})
 
 
 def test_evaluation_episodes_past_the_maximum_are_refused_up_front(tmp_path, capsys):
@@ -534,12 +505,12 @@ def test_evaluation_episodes_past_the_maximum_are_refused_up_front(tmp_path, cap
     run directory is made, and `ilfo eval --episodes` by the same check before it loads."""
     from ilfo.training.config import MAX_EVAL_EPISODES
 
-    most = TrainConfig(**{**TINY, "eval_episodes": MAX_EVAL_EPISODES})
+    most = TrainConfig(**{**TINY_RUN, "eval_episodes": MAX_EVAL_EPISODES})
     assert most.eval_episodes == MAX_EVAL_EPISODES
     too_many = MAX_EVAL_EPISODES + 1
     message = rf"eval_episodes \(--eval-episodes\) must be from 1 to {MAX_EVAL_EPISODES:,}"
     with pytest.raises(ValueError, match=rf"{message} .*got {too_many:,}"):
-        TrainConfig(**{**TINY, "eval_episodes": too_many})
+        TrainConfig(**{**TINY_RUN, "eval_episodes": too_many})
     out = tmp_path / "runs"
     argv = ["train", "--eval-episodes", "1000000000", "--demos", DEMOS, "--no-progress"]
     assert main([*argv, "--out", str(out)]) == 2
@@ -555,7 +526,7 @@ def test_evaluation_episodes_past_the_maximum_are_refused_up_front(tmp_path, cap
 
 
 def test_numpy_integers_are_taken_as_ints():
-    config = TrainConfig(**{**TINY, "seed": np.int64(3), "steps": np.int32(400)})
+    config = TrainConfig(**{**TINY_RUN, "seed": np.int64(3), "steps": np.int32(400)})
     assert type(config.seed) is int and type(config.steps) is int
     assert json.loads(json.dumps(dataclasses.asdict(config)))["seed"] == 3
 
@@ -567,7 +538,7 @@ def test_a_relative_demos_path_is_recorded_absolute(tmp_path, monkeypatch, capsy
     work.mkdir()
     shutil.copy(DEMOS, work / "demos.npz")
     monkeypatch.chdir(work)
-    run = _train(tmp_path, "run", demos="demos.npz", steps=200)
+    run = train_tiny(tmp_path, "run", demos="demos.npz", steps=200)
     recorded = json.loads((run / "config.json").read_text())["demos"]
     assert recorded == str(work / "demos.npz")
     monkeypatch.chdir(tmp_path)
@@ -585,9 +556,9 @@ def test_scores_are_not_normalised_by_a_negative_demo_return(tmp_path):
     )
     path = tmp_path / "pendulum.npz"
     demo_io.save(path, [episode], env_id="Pendulum-v1")
-    settings = {**TINY, "env": "Pendulum-v1", "demos": str(path), "horizon": None, "steps": 400}
+    settings = {**TINY_RUN, "env": "Pendulum-v1", "demos": str(path), "horizon": None, "steps": 400}
     with pytest.warns(UserWarning, match="mean return is -120, not positive"):
         run = Trainer(TrainConfig(**settings), tmp_path / "run", progress=False).train()
-    evals = [r for r in _metrics(run) if r["eval_score"]]
+    evals = [r for r in metrics_rows(run) if r["eval_score"]]
     assert evals and all(r["eval_score_norm"] == "" for r in evals)
     assert float(evals[-1]["eval_score"]) < 0

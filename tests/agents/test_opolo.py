@@ -16,7 +16,7 @@ from ilfo.composition.opolo import OPOLOConfig, make_opolo
 from ilfo.replay import ReplayData
 from ilfo.rewards import Discriminator, DiscriminatorConfig, expert_transitions
 from ilfo.training import Trainer, load_run_policy
-from test_train import _metrics, _train
+from tiny_run import metrics_rows, train_tiny
 
 
 def test_running_moments_equal_the_pooled_mean_and_variance():
@@ -123,14 +123,14 @@ OPOLO = dict(
 
 
 def test_opolo_trains_deterministically_and_resume_equals_uninterrupted(tmp_path):
-    full = _metrics(_train(tmp_path, "full", **OPOLO))
-    assert full == _metrics(_train(tmp_path, "again", **OPOLO))
+    full = metrics_rows(train_tiny(tmp_path, "full", **OPOLO))
+    assert full == metrics_rows(train_tiny(tmp_path, "again", **OPOLO))
     assert any(r["reward_loss"] for r in full) and any(r["critic_loss"] for r in full)
-    run = _train(tmp_path, "resumed", **{**OPOLO, "steps": 300})
+    run = train_tiny(tmp_path, "resumed", **{**OPOLO, "steps": 300})
     latest = load_run_policy(run, "latest")  # a checkpoint of the whole state reads back
     assert latest.checkpoint is not None and latest.checkpoint.step == 300
     trainer = Trainer.resume(run, progress=False, steps=600)
-    assert _metrics(trainer.train()) == full
+    assert metrics_rows(trainer.train()) == full
 
 
 def test_opolo_defaults_follow_the_authors_per_env():

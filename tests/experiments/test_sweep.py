@@ -39,18 +39,9 @@ from ilfo.training.run_dir import (
     REPLAY_FILE,
     REPLAY_OMITTED,
 )
+from tiny_run import TINY_RUN
 
-TINY = {
-    "demos": str(Path(__file__).parents[2] / "data" / "demos" / "Hopper-v5-scripted.npz"),
-    "horizon": 100,
-    "start_steps": 200,
-    "eval_every": 200,
-    "eval_episodes": 1,
-    "checkpoint_every": 200,
-    "preset": "fast",
-    "replay_capacity": 5000,
-    "steps": 400,
-}
+TINY = {**{k: v for k, v in TINY_RUN.items() if k != "env"}, "steps": 400}  # env: an axis
 
 
 def test_expansion_names_order_and_settings():
