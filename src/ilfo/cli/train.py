@@ -205,7 +205,15 @@ def _run_eval(args: argparse.Namespace) -> int:
 
 
 def _add_plot_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("plot", help="Plot evaluation curves of runs (mean and spread over seeds).")
+    p = sub.add_parser(
+        "plot",
+        help="Plot evaluation curves of runs (mean and spread over seeds).",
+        description=(
+            "Plot evaluation curves of runs: the mean and min-max band over seeds, one curve per "
+            "env, algo, demos and settings (runs trained otherwise, e.g. at another --preset, are "
+            "separate curves, each label naming its settings)."
+        ),
+    )
     p.add_argument("run_dirs", nargs="+", help="run directories")
     p.add_argument(
         "--out", default="learning_curves.png", help="output image (default learning_curves.png)"

@@ -15,7 +15,6 @@ paper does not say which it uses.
 from __future__ import annotations
 
 import csv
-import dataclasses
 import functools
 import json
 import math
@@ -29,6 +28,7 @@ import numpy as np
 
 from ilfo.experiments import stats
 from ilfo.experiments.paper import PaperCell, paper_ablation, paper_score
+from ilfo.training.run_labels import run_variant, shared_settings, training_settings
 
 SCORE = "eval_score_norm"
 RETURN = "eval_return_norm"
@@ -133,104 +133,6 @@ def collect_runs(paths: Iterable[str | Path]) -> tuple[list[RunResult], list[str
     return runs, skipped
 
 
-def _contact_forces_variant(config: dict[str, Any]) -> str | None:
-    """ "contact-forces" or "no-contact-forces" for a run that observed Ant's or Humanoid's
-    contact forces otherwise than ``ilfo train``'s default for its algo, else None. A config
-    without the setting predates it, when every run observed them."""
-    from ilfo.algos import ALGOS
-    from ilfo.envs.make import CONTACT_FORCE_DIMS
-    from ilfo.training.config import default_contact_forces
-
-    env, algo = config.get("env"), config.get("algo")
-    if env not in CONTACT_FORCE_DIMS or algo not in ALGOS:
-        return None
-    default = default_contact_forces(env, ALGOS[algo].imitation)
-    observed = config.get("contact_forces", True)
-    observed = default if observed is None else bool(observed)
-    if observed == default:
-        return None
-    return "contact-forces" if observed else "no-contact-forces"
-
-
-def _reward_settings_variant(config: dict[str, Any], source: Path) -> str | None:
-    """For a run of an imitation algo, the settings of its reward in which it differs from the
-    algo's defaults for its env, as "pwil.subsample=20+pwil.kernel_dim=23"; None where it has
-    none (the seed, which the trainer sets, is not a setting). A setting a config predates
-    reads back as its default."""
-    from ilfo.algos import ALGOS, REWARD_PARTS
-    from ilfo.training.config import TrainConfig, config_from_dict
-
-    recipe = ALGOS.get(str(config.get("algo")))
-    if recipe is None or recipe.reward is None:
-        return None
-    run = config_from_dict(config, source)
-    default = TrainConfig(env=run.env, algo=run.algo, seed=run.seed)
-    given, usual = run.part_config(recipe.reward), default.part_config(recipe.reward)
-    set_by_trainer = REWARD_PARTS[recipe.reward].set_by_trainer
-    changed = [
-        f"{recipe.reward}.{f.name}={_setting_label(getattr(given, f.name))}"
-        for f in dataclasses.fields(given)
-        if f.name not in set_by_trainer and getattr(given, f.name) != getattr(usual, f.name)
-    ]
-    return "+".join(changed) or None
-
-
-def _training_settings(config: dict[str, Any], source: Path) -> tuple[str, ...]:
-    """Labels of a run's training settings that differ from ``ilfo train``'s defaults for its
-    env and algo: the preset, steps, updates per step, episodes, and its agent's fields. A
-    config this version cannot read raises (the report leaves the run out and says why)."""
-    from ilfo.algos import AGENT_PARTS
-    from ilfo.training.config import TrainConfig, config_from_dict, preset_changes_agent
-
-    run = config_from_dict(config, source)
-    default = TrainConfig(env=run.env, algo=run.algo, seed=run.seed)
-    agent = run.recipe.agent
-    # Agents are compared as runs build them (config.json records them so: DDPG's TD3 changes,
-    # the time augmentation of fixed-horizon runs), at the run's preset and episodes, which
-    # their own labels name; the preset only where it changes the agent (not SAC, OPOLO or the
-    # authors' settings of f-IRL and GAIfO).
-    horizon = run.horizon or 1000
-    alike = dataclasses.replace(default, preset=run.preset, fixed_horizon=run.uses_fixed_horizon)
-    labels = []
-    if run.preset != default.preset and preset_changes_agent(alike, horizon):
-        labels.append(f"{run.preset} preset")
-    if run.steps != default.steps:
-        labels.append(f"{_steps_label(run.steps)} steps")
-    if run.updates_per_step != default.updates_per_step:
-        labels.append(f"{run.updates_per_step} updates/step")
-    if run.uses_fixed_horizon != default.uses_fixed_horizon:
-        labels.append("fixed horizon" if run.uses_fixed_horizon else "standard episodes")
-    replay = () if AGENT_PARTS[agent].on_policy else ("random_steps", "replay_capacity")
-    for name in (*replay, "horizon", "healthy_angle_range"):
-        if getattr(run, name) != getattr(default, name):
-            labels.append(f"{name}={_setting_label(getattr(run, name))}")
-    if run.eval_episodes != default.eval_episodes:
-        labels.append(f"{run.eval_episodes} evaluation episodes")
-    given, usual = run.agent_config(horizon), alike.agent_config(horizon)
-    set_by_trainer = AGENT_PARTS[agent].set_by_trainer
-    labels += [
-        f"{agent}.{f.name}={_setting_label(getattr(given, f.name))}"
-        for f in dataclasses.fields(given)
-        if f.name not in set_by_trainer and getattr(given, f.name) != getattr(usual, f.name)
-    ]
-    return tuple(labels)
-
-
-def _steps_label(steps: int) -> str:
-    for size, suffix in ((1_000_000, "M"), (1_000, "k")):
-        if steps >= size and steps % (size // 100) == 0:
-            return f"{steps / size:g}{suffix}"
-    return str(steps)
-
-
-def _setting_label(value: Any) -> str:
-    if isinstance(value, float):
-        return format(value, "g")
-    if isinstance(value, tuple | list):
-        return "-".join(map(_setting_label, value))
-    return str(value)
-
-
 def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | None:
     """A run's evaluations (None if it has none with a normalised score yet)."""
     from ilfo.training import read_metrics, read_run_config
@@ -245,10 +147,7 @@ def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | Non
     )
     # Runs that observed otherwise than the default are not its cell (nor a sweep variant's),
     # nor are runs whose reward differs from the algo's (a sweep's variant already says how).
-    if variant is None:
-        variant = _reward_settings_variant(config, run_dir / "config.json")
-    labels = (variant, _contact_forces_variant(config))
-    variant = "+".join(label for label in labels if label) or None
+    variant = run_variant(config, run_dir / "config.json", variant)
     if not (run_dir / "metrics.csv").is_file():  # a sweep's run before its first episode
         return None
     all_rows = read_metrics(run_dir)
@@ -267,7 +166,7 @@ def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | Non
         curve_scores=np.array([float(r[SCORE]) for r in rows]),
         final_return=float(rows[-1][RETURN]) if rows[-1].get(RETURN) else math.nan,
         shipped_demos=shipped,
-        settings=_training_settings(config, run_dir / "config.json"),
+        settings=training_settings(config, run_dir / "config.json"),
         trained_step=int(all_rows[-1]["step"]),
     )
 
@@ -359,8 +258,7 @@ class Cell:
     @property
     def settings(self) -> tuple[str, ...]:
         """The training settings, other than the defaults, that all its runs share."""
-        shared = set.intersection(*(set(r.settings) for r in self.runs))
-        return tuple(label for label in self.runs[0].settings if label in shared)
+        return shared_settings([r.settings for r in self.runs])
 
     @property
     def mixed_settings(self) -> dict[str, tuple[int, ...]]:
