@@ -102,6 +102,17 @@ updates were 96% of a step). N updates per step cost (1 - share) + share * N tim
 Measured on TD3 and used for every off-policy algo: an algo whose step goes more to its reward
 (oops-adv-td3, opolo) is costed a little high."""
 
+RUN_FIXED_CORE_SECONDS = 32.0
+"""For the estimate only: one core's seconds that a run costs whatever its steps (each start
+of one, a resume included): its process's imports, its envs and demos, JAX's compilation of
+its programs and what else does not scale with its steps; nearly all of a tiny run. Measured
+on one smoke run (``SMOKE_CONFIG``: 400 steps, two evaluations of one 100-step episode) of
+oops-td3 on Hopper, ``ilfo train`` with ``ILFO_COMPILATION_CACHE=off`` (a first run's
+compilation): 33.7 s of CPU time, user and system (92 s wall beside two pinned runs), less
+its 400 steps at ``STEPS_PER_CORE_SECOND`` (1.3 s); 2026-12-07, the 2-core Intel Xeon
+machine. Algos that compile more programs (opolo, firl-fkl) likely cost more, a start that
+finds its programs in the compilation cache less."""
+
 MEASURE_SECONDS_PER_PAIR: dict[str, float] = {"distances": 0.6, "solvers": 45.0}
 """For the estimate only: one core's seconds per (final rollout, expert trajectory) pair of
 each measure, on Hopper and Walker2d (2026-12-06, beside one or two training runs): Table 3's
@@ -164,10 +175,11 @@ class Plan:
         return seconds / 3600
 
     def core_hours(self, root: Path | None = None) -> float:
-        """Estimated core-hours at the measured rates (``STEPS_PER_CORE_SECOND``), the
-        measures included. With ``root``, the experiment's directory, only what is left: the
-        steps past each run's newest checkpoint (what a resume continues from) and the
-        measures' pairs not kept."""
+        """Estimated core-hours at the measured rates (``STEPS_PER_CORE_SECOND``) with each
+        run's fixed cost (``RUN_FIXED_CORE_SECONDS``), the measures included. With ``root``,
+        the experiment's directory, only what is left: the steps past each run's newest
+        checkpoint (what a resume continues from, paying the fixed cost again; a finished
+        run none) and the measures' pairs not kept."""
         from ilfo.training.run_dir import checkpoint_steps
 
         seconds = 3600 * self.measure_hours(root)
@@ -182,7 +194,8 @@ class Plan:
                 if root is not None:
                     kept = checkpoint_steps(root / sub / RUNS_DIR / run.name)
                     steps -= min(kept[-1][0], run.steps) if kept else 0
-                seconds += steps / rate * _updates_cost(run.config)
+                if steps > 0:
+                    seconds += RUN_FIXED_CORE_SECONDS + steps / rate * _updates_cost(run.config)
         if self.calibration is not None:  # ~1,500 env + policy steps/s and ~0.1 s per solve
             cal = self.calibration
             seconds += cal.rollouts * ((cal.horizon or 1000) / 1500 + 0.1)
