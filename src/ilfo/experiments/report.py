@@ -4,7 +4,7 @@ beside both, and learning curves and performance profiles as figures.
 
 ``collect_runs`` finds runs (sweep directories, run directories, or folders holding either);
 ``build_report`` groups them into cells; ``write_report`` writes ``report.md``, ``cells.csv``,
-``aggregates.csv`` and PNG figures.
+``aggregates.csv`` and PNG figures (``report_figures``).
 
 The final performance of a run is the paper's: its last evaluation (``eval_episodes``
 deterministic fixed-horizon episodes), normalised by the demos' mean return
@@ -28,6 +28,7 @@ import numpy as np
 
 from ilfo.experiments import stats
 from ilfo.experiments.paper import PaperCell, paper_ablation, paper_score
+from ilfo.experiments.report_figures import plot_curves, plot_profiles, profile_lines
 from ilfo.training.run_labels import run_variant, shared_settings, training_settings
 
 SCORE = "eval_score_norm"
@@ -415,10 +416,6 @@ def _fmt(value: float | None, digits: int = 2) -> str:
     return "" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
 
 
-def _label(algo: str, num_demos: int, variant: str | None) -> str:
-    return f"{algo}{f' [{variant}]' if variant else ''}, {num_demos} demo{'s' * (num_demos > 1)}"
-
-
 def _seeds_text(cell: Cell) -> str:
     unfinished = [r for r in cell.runs if not r.finished]
     text = str(len(cell.runs))
@@ -563,7 +560,7 @@ def write_report(report: Report, out: str | Path, *, sources: Sequence[str] = ()
                 writer.writeheader()
                 writer.writerows(rows)
         written.append(path)
-    figures = _plot_curves(report, out) + _plot_profiles(report, out)
+    figures = plot_curves(report, out) + plot_profiles(report, out)
     lines = [
         "# ilfo report",
         "",
@@ -657,85 +654,8 @@ def write_report(report: Report, out: str | Path, *, sources: Sequence[str] = ()
     if report.skipped:
         lines += ["", "## Left out", ""] + [f"- {s}" for s in report.skipped]
     if figures:
-        lines += ["", "## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figures]
+        lines += ["", "## Figures", "", *profile_lines(report), ""]
+        lines += [f"![{p.stem}]({p.name})" for p in figures]
     path = out / "report.md"
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return [path, *written, *figures]
-
-
-def _curve_band(run_results: Sequence[RunResult], resamples: int):
-    """Common steps, the mean over seeds and its pointwise 95% bootstrap band."""
-    last = min(r.final_step for r in run_results)
-    steps = run_results[0].curve_steps[run_results[0].curve_steps <= last]
-    values = np.stack([np.interp(steps, r.curve_steps, r.curve_scores) for r in run_results])
-    mean = values.mean(axis=0)
-    if len(run_results) < 2:
-        return steps, mean, mean, mean
-    rng = np.random.default_rng(0)
-    picks = rng.integers(0, len(run_results), size=(resamples, len(run_results)))
-    means = values[picks].mean(axis=1)
-    low, high = np.percentile(means, [2.5, 97.5], axis=0)
-    return steps, mean, low, high
-
-
-def _plot_curves(report: Report, out: Path) -> list[Path]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figures = []
-    for env in dict.fromkeys(c.env for c in report.cells):
-        fig, ax = plt.subplots(figsize=(6, 4))
-        for c in (c for c in report.cells if c.env == env):
-            steps, mean, low, high = _curve_band(c.runs, min(report.resamples, 1000))
-            n = len(c.runs)
-            label = f"{_label(c.algo, c.num_demos, c.variant)} ({n} seed{'s' if n != 1 else ''})"
-            ax.plot(steps, mean, label=label)
-            ax.fill_between(steps, low, high, alpha=0.2)
-        title = f"{env}: mean over seeds, 95% bootstrap band"
-        path = out / f"curves_{env}.png"
-        figures.append(finish_figure(fig, ax, title, "environment steps", "normalised score", path))
-    return figures
-
-
-def finish_figure(fig: Any, ax: Any, title: str, xlabel: str, ylabel: str, path: Path) -> Path:
-    """Label, save and close a report figure (every figure of ``ilfo report`` and
-    ``ilfo reproduce``)."""
-    import matplotlib.pyplot as plt
-
-    ax.set_title(title)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
-def _plot_profiles(report: Report, out: Path) -> list[Path]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figures = []
-    taus = np.linspace(0.0, 1.25, 101)
-    for demos in sorted({c.num_demos for c in report.cells}):
-        groups = [g for g in report.groups() if g[1] == demos]
-        fig, ax = plt.subplots(figsize=(6, 4))
-        for algo, _, variant in groups:
-            envs = report.envs_of(algo, demos, variant)
-            scores = report.task_scores(algo, demos, variant, envs)
-            profile, low, high = stats.performance_profile_band(
-                scores, taus, resamples=min(report.resamples, 1000)
-            )
-            ax.plot(taus, profile, label=f"{_label(algo, demos, variant)} ({len(envs)} tasks)")
-            ax.fill_between(taus, low, high, alpha=0.2)
-        title = f"Performance profile, {demos} demo{'s' * (demos > 1)}"
-        path = out / f"profile_{demos}demos.png"
-        ylabel = "fraction of runs with score > tau"
-        figures.append(finish_figure(fig, ax, title, "normalised score tau", ylabel, path))
-    return figures

@@ -669,7 +669,7 @@ def write_solvers(
     import matplotlib.pyplot as plt
 
     from ilfo.experiments.distances import SOLVER_LAMBDAS, solver_costs
-    from ilfo.experiments.report import finish_figure
+    from ilfo.experiments.report_figures import finish_figure
     from ilfo.training.run_dir import SOLVERS_FILE
 
     runs, unfinished = _finished(runs)
