@@ -14,7 +14,7 @@ from ilfo.config import add_dataclass_arguments, flag_name, overrides_from_args
 
 if TYPE_CHECKING:
     from ilfo.algos import AgentPart
-    from ilfo.training import TrainConfig
+    from ilfo.training import DemoSource, TrainConfig
 
 
 def _add_train_parser(sub: argparse._SubParsersAction) -> None:
@@ -150,12 +150,48 @@ def _run_train(args: argparse.Namespace) -> int:
             run_dir.rmdir()  # nothing was written: a failed start leaves no directory behind
             raise
     trainer.resume_command = f"{_command()} train --resume {shlex.quote(str(trainer.run_dir))}"
-    print(f"run directory: {trainer.run_dir}")
-    print(trainer.checkpoint_plan())
+    print(start_summary(trainer.config, trainer.run_dir, trainer.demo_source, trainer.step))
+    print(f"  {trainer.checkpoint_plan()}")
     run_dir = trainer.train()
     final = trainer.last_eval
     print(f"done: {run_dir}  last evaluation: {json.dumps(final)}")
     return 0
+
+
+def start_summary(
+    config: TrainConfig, run_dir: Path, demos: DemoSource | None, step: int = 0
+) -> str:
+    """What ``ilfo train`` prints as it starts (or resumes at ``step``): the algo, env, preset
+    and seed, the demos, the steps, the expected duration where the algo has a measured rate
+    (``reproduce.run_core_seconds``, the one estimate of a run's compute) and the run
+    directory."""
+    from ilfo.experiments.reproduce import run_core_seconds
+
+    lines = [f"{config.algo} on {config.env}, {config.preset} preset, seed {config.seed}"]
+    if demos is None:
+        lines.append(f"  demos: none ({config.algo} learns from the task reward)")
+    else:
+        first = "demo" if demos.num_demos == 1 else f"{demos.num_demos} demos"
+        lines.append(f"  demos: {demos.path} (its first {first})")
+    resumed = f", from step {step:,}" if step else ""
+    lines.append(f"  steps: {config.steps:,}{resumed}; evaluated every {config.eval_every:,}")
+    settings = {"algo": config.algo, "preset": config.preset}
+    seconds = run_core_seconds(
+        {**settings, "updates_per_step": config.updates_per_step}, config.steps - step
+    )
+    if seconds:
+        lines.append(
+            f"  expected: ~{_duration(seconds)} of one core (the measured rates of "
+            "docs/benchmarks.md; longer beside other work)"
+        )
+    lines.append(f"  writes: {run_dir}")
+    return "\n".join(lines)
+
+
+def _duration(seconds: float) -> str:
+    if seconds >= 5400:
+        return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 60:.0f} min" if seconds >= 90 else f"{seconds:.0f} s"
 
 
 def _add_eval_parser(sub: argparse._SubParsersAction) -> None:

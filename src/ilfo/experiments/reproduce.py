@@ -21,7 +21,7 @@ experiment once their algo name is in ``ilfo.algos``.
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -185,17 +185,12 @@ class Plan:
         seconds = 3600 * self.measure_hours(root)
         for sub, spec in self.sweeps.items():
             for run in expand(spec):
-                rate = STEPS_PER_CORE_SECOND.get(run.config["algo"], 100.0)
-                if run.config.get("preset") == "paper" and _preset_changes_agent(
-                    run.config["algo"]
-                ):
-                    rate /= 3
                 steps = run.steps
                 if root is not None:
                     kept = checkpoint_steps(root / sub / RUNS_DIR / run.name)
                     steps -= min(kept[-1][0], run.steps) if kept else 0
-                if steps > 0:
-                    seconds += RUN_FIXED_CORE_SECONDS + steps / rate * _updates_cost(run.config)
+                estimate = run_core_seconds(run.config, steps, unmeasured_rate=100.0)
+                seconds += estimate or 0.0  # never None: unmeasured_rate stands in
         if self.calibration is not None:  # ~1,500 env + policy steps/s and ~0.1 s per solve
             cal = self.calibration
             seconds += cal.rollouts * ((cal.horizon or 1000) / 1500 + 0.1)
@@ -251,7 +246,27 @@ def _pairs_kept(run_dir: Path, measure: str, total: int) -> int:
     return 0 if partial is None else min(total, len(partial[1]))
 
 
-def _updates_cost(config: dict[str, Any]) -> float:
+def run_core_seconds(
+    config: Mapping[str, Any], steps: int, *, unmeasured_rate: float | None = None
+) -> float | None:
+    """One core's estimated seconds for ``steps`` steps of a run with ``config``'s algo,
+    preset and updates per step (a sweep's settings, ``ilfo train``'s defaults where absent):
+    its fixed cost (``RUN_FIXED_CORE_SECONDS``) and its steps at ``STEPS_PER_CORE_SECOND``,
+    a third of it at the paper preset where that changes the agent, times ``UPDATE_SHARE``'s
+    cost of more updates per step. 0 for no steps; None for an algo without a measured rate,
+    unless ``unmeasured_rate`` (steps/s at the fast preset) stands in for one."""
+    algo = config["algo"]
+    rate = STEPS_PER_CORE_SECOND.get(algo, unmeasured_rate)
+    if steps <= 0:
+        return 0.0
+    if rate is None:
+        return None
+    if config.get("preset", "paper") == "paper" and _preset_changes_agent(algo):
+        rate /= 3
+    return RUN_FIXED_CORE_SECONDS + steps / rate * _updates_cost(config)
+
+
+def _updates_cost(config: Mapping[str, Any]) -> float:
     """How many times a step at one update per step a run's step costs (``UPDATE_SHARE``)."""
     updates = config.get("updates_per_step", 1)
     if updates == 1 or _on_policy(config["algo"]):
