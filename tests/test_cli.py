@@ -194,3 +194,20 @@ def test_train_starts_by_saying_what_it_trains_and_for_how_long():
     unmeasured = start_summary(TrainConfig(algo="td7"), run_dir, None)
     assert "demos: none (td7 learns from the task reward)" in unmeasured
     assert "expected" not in unmeasured
+
+
+def test_train_help_opens_with_the_common_options(capsys):
+    """`ilfo train --help` lists hundreds of options; its first screen names the common ones
+    and says where the rest are."""
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    top = capsys.readouterr().out.splitlines()[:40]
+    common = ["--env", "--algo", "--demos", "--num-demos", "--steps", "--preset", "--seed"]
+    common += ["--out", "--resume", "--config"]
+    for flag in common:
+        assert any(line.startswith(f"  {flag} ") for line in top), flag
+    from ilfo.training import TrainConfig
+
+    (steps,) = [line for line in top if line.startswith("  --steps N ")]
+    assert steps.endswith(f"(default {TrainConfig().steps:,})")  # read off the config
+    assert any("grouped by part" in line for line in top)

@@ -24,14 +24,8 @@ def _add_train_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "train",
         help="Train a policy (default: OOPS+TD3 on Hopper-v5 from one shipped expert demo).",
-        description=(
-            "Train a policy from state-only demonstrations (or on the task reward for td3/sac). "
-            "Writes runs/<env>__<algo>__<seed>__<time>/ with config.json, metrics.csv, tb/ "
-            "(TensorBoard), checkpoints/, policy.msgpack (the final policy), best_policy.msgpack "
-            "and best_policy.json (the best-evaluated one) and learning_curve.png. Ctrl-C "
-            "checkpoints; --resume RUN_DIR continues exactly where the run stopped. Every "
-            "setting, the agent's and the rewarder's included, is recorded in config.json."
-        ),
+        usage="%(prog)s [options]",  # the flags are too many to list: the description's first
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_dataclass_arguments(p, TrainConfig)
     p.add_argument(
@@ -58,7 +52,62 @@ def _add_train_parser(sub: argparse._SubParsersAction) -> None:
         add_dataclass_arguments(
             group, PART_CONFIGS[name], part.set_by_trainer, prefix=name, defaults=presets
         )
+    p.description = _train_description(p, dataclasses.asdict(TrainConfig()))
     p.set_defaults(run=_run_train)
+
+
+TRAIN_DESCRIPTION = (
+    "Train a policy from state-only demonstrations (or on the task reward for td3/sac). "
+    "Writes runs/<env>__<algo>__<seed>__<time>/ with config.json, metrics.csv, tb/ "
+    "(TensorBoard), checkpoints/, policy.msgpack (the final policy), best_policy.msgpack "
+    "and best_policy.json (the best-evaluated one) and learning_curve.png. Ctrl-C "
+    "checkpoints; --resume RUN_DIR continues exactly where the run stopped. Every "
+    "setting, the agent's and the rewarder's included, is recorded in config.json."
+)
+
+COMMON_TRAIN_FLAGS: dict[str, str] = {
+    "--env ENV": "the task",
+    "--algo ALGO": "the algorithm, one of the choices below",
+    "--demos FILE.npz": "the demo file (none: the env's shipped expert demos)",
+    "--num-demos N": "how many of its demos to imitate (the first N)",
+    "--steps N": "environment steps in total",
+    "--preset {paper,fast}": "agent sizes: the paper's networks, or smaller",
+    "--seed N": "seed of everything",
+    "--out DIR": "where run directories go",
+    "--resume RUN_DIR": "continue a run from its last checkpoint",
+    "--config FILE.json": "start from a file's settings (a run's config.json)",
+}
+"""The options most runs set, listed first in ``ilfo train --help``, a short line each (with
+its default, read off the parser); their full help follows with the others."""
+
+
+def _train_description(parser: argparse.ArgumentParser, defaults: dict[str, Any]) -> str:
+    """The description, then ``COMMON_TRAIN_FLAGS`` as a short list (each checked to be one of
+    ``parser``'s flags; with its default from ``defaults``, by the flag's field), then where
+    the rest are."""
+    import textwrap
+
+    actions = {flag: action for action in parser._actions for flag in action.option_strings}
+    unknown = [name for name in COMMON_TRAIN_FLAGS if name.split()[0] not in actions]
+    if unknown:  # a renamed flag: the short list must not name one that is gone
+        raise AssertionError(f"COMMON_TRAIN_FLAGS names no flag of ilfo train: {unknown}")
+    width = max(len(name) for name in COMMON_TRAIN_FLAGS) + 2
+    lines = [textwrap.fill(TRAIN_DESCRIPTION, 78), "", "Common options:"]
+    for name, text in COMMON_TRAIN_FLAGS.items():
+        default = defaults.get(actions[name.split()[0]].dest)
+        if default is not None:
+            shown = f"{default:,}" if isinstance(default, int) else default
+            text += f" (default {shown})"
+        lines.append(f"  {name:<{width}}{text}")
+    lines += [
+        "",
+        textwrap.fill(
+            "All of the options follow: the run's own, then each agent's and reward's, "
+            "grouped by part (--td3-*, --oops-*, ...).",
+            78,
+        ),
+    ]
+    return "\n".join(lines)
 
 
 def _preset_defaults(part: AgentPart) -> dict[str, str] | None:
