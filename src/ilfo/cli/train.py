@@ -56,6 +56,18 @@ def _add_train_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=_run_train)
 
 
+def bar_fields() -> str:
+    """What the progress bar's fields mean (``training.loop``'s ``_postfix`` sets them)."""
+    from ilfo.algos import ALGOS
+
+    task_reward = [name for name, recipe in ALGOS.items() if not recipe.imitation]
+    return (
+        "sps: steps/s of the last episode, updates included; proxy: the imitation reward's "
+        "return of the last training episode (the task reward's for "
+        f"{', '.join(task_reward)}); eval: the last evaluation's (normalised) score"
+    )
+
+
 TRAIN_DESCRIPTION = (
     "Train a policy from state-only demonstrations (or on the task reward for td3/sac). "
     "Writes runs/<env>__<algo>__<seed>__<time>/ with config.json, metrics.csv, tb/ "
@@ -99,14 +111,14 @@ def _train_description(parser: argparse.ArgumentParser, defaults: dict[str, Any]
             shown = f"{default:,}" if isinstance(default, int) else default
             text += f" (default {shown})"
         lines.append(f"  {name:<{width}}{text}")
-    lines += [
-        "",
+    lines += ["", textwrap.fill(f"The progress bar's fields: {bar_fields()}.", 78), ""]
+    lines.append(
         textwrap.fill(
             "All of the options follow: the run's own, then each agent's and reward's, "
             "grouped by part (--td3-*, --oops-*, ...).",
             78,
-        ),
-    ]
+        )
+    )
     return "\n".join(lines)
 
 
@@ -181,26 +193,27 @@ def _run_train(args: argparse.Namespace) -> int:
 
     overrides = overrides_from_args(args, TrainConfig)
     groups = part_flags(args)
+    progress = not args.no_progress
     if args.resume:
         extra = [flag_name(k) for k in overrides if k != "steps"]
         extra += [flag_name(k, name) for name, given in groups.items() for k in given]
         extra += ["--config"] * (args.config is not None)
         if extra:
             raise ValueError(f"--resume takes its config from the run; drop {', '.join(extra)}")
-        trainer = Trainer.resume(
-            args.resume, progress=not args.no_progress, steps=overrides.get("steps")
-        )
+        trainer = Trainer.resume(args.resume, progress=progress, steps=overrides.get("steps"))
     else:
         config = config_from_args(args.config, overrides, groups)
         run_dir = create_run_dir(config.out, run_name(config))  # new and empty, never shared
         try:
-            trainer = Trainer(config, run_dir, progress=not args.no_progress)
+            trainer = Trainer(config, run_dir, progress=progress)
         except BaseException:
             run_dir.rmdir()  # nothing was written: a failed start leaves no directory behind
             raise
     trainer.resume_command = f"{_command()} train --resume {shlex.quote(str(trainer.run_dir))}"
-    print(start_summary(trainer.config, trainer.run_dir, trainer.demo_source, trainer.step))
-    print(f"  {trainer.checkpoint_plan()}")
+    summary = start_summary(
+        trainer.config, trainer.run_dir, trainer.demo_source, trainer.step, progress=progress
+    )
+    print(f"{summary}\n  {trainer.checkpoint_plan()}")
     run_dir = trainer.train()
     final = trainer.last_eval
     print(f"done: {run_dir}  last evaluation: {json.dumps(final)}")
@@ -208,12 +221,17 @@ def _run_train(args: argparse.Namespace) -> int:
 
 
 def start_summary(
-    config: TrainConfig, run_dir: Path, demos: DemoSource | None, step: int = 0
+    config: TrainConfig,
+    run_dir: Path,
+    demos: DemoSource | None,
+    step: int = 0,
+    *,
+    progress: bool = False,
 ) -> str:
     """What ``ilfo train`` prints as it starts (or resumes at ``step``): the algo, env, preset
     and seed, the demos, the steps, the expected duration where the algo has a measured rate
-    (``reproduce.run_core_seconds``, the one estimate of a run's compute) and the run
-    directory."""
+    (``reproduce.run_core_seconds``, the one estimate of a run's compute), the run directory
+    and, with ``progress``, what the progress bar's fields mean."""
     from ilfo.experiments.reproduce import run_core_seconds
 
     lines = [f"{config.algo} on {config.env}, {config.preset} preset, seed {config.seed}"]
@@ -234,6 +252,8 @@ def start_summary(
             "docs/benchmarks.md; longer beside other work)"
         )
     lines.append(f"  writes: {run_dir}")
+    if progress:
+        lines.append(f"  progress bar: {bar_fields()}")
     return "\n".join(lines)
 
 
