@@ -162,3 +162,52 @@ def test_an_accelerator_jax_cannot_start_is_a_clear_error():
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith("ilfo: error: JAX_PLATFORMS=cuda: JAX cannot start 'cuda'")
     assert "unset JAX_PLATFORMS" in last and "Traceback" not in done.stderr
+
+
+def test_train_starts_by_saying_what_it_trains_and_for_how_long():
+    """The start summary names the algo, env, preset, seed, demo file and count, steps and the
+    run directory; the expected duration comes from the measured rates (shorter for a run
+    resumed near its end; none for an algo without a measured rate)."""
+    from pathlib import Path
+
+    from ilfo.cli.train import start_summary
+    from ilfo.training import DemoSource, TrainConfig
+
+    demos = DemoSource("/data/experts/Walker2d-v5/demos.npz", "0" * 64, 4, 4000.0)
+    config = TrainConfig(env="Walker2d-v5", num_demos=4, seed=3, steps=300_000, preset="fast")
+    run_dir = Path("runs/Walker2d-v5__oops-td3__3__20261207-120000")
+    text = start_summary(config, run_dir, demos)
+    lines = text.splitlines()
+    assert lines[0] == "oops-td3 on Walker2d-v5, fast preset, seed 3"
+    assert "  demos: /data/experts/Walker2d-v5/demos.npz (its first 4 demos)" in lines
+    assert "  steps: 300,000; evaluated every 5,000" in lines
+    assert lines[-1] == f"  writes: {run_dir}"
+
+    def expected_seconds(summary):
+        (line,) = [line for line in summary.splitlines() if line.startswith("  expected: ~")]
+        value, unit = line.removeprefix("  expected: ~").split()[:2]
+        return float(value) * {"s": 1, "min": 60, "h": 3600}[unit]
+
+    late = start_summary(config, run_dir, demos, step=290_000)
+    assert "  steps: 300,000, from step 290,000; evaluated every 5,000" in late.splitlines()
+    assert 0 < expected_seconds(late) < expected_seconds(text) / 5
+    unmeasured = start_summary(TrainConfig(algo="td7"), run_dir, None)
+    assert "demos: none (td7 learns from the task reward)" in unmeasured
+    assert "expected" not in unmeasured
+
+
+def test_train_help_opens_with_the_common_options(capsys):
+    """`ilfo train --help` lists hundreds of options; its first screen names the common ones
+    and says where the rest are."""
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    top = capsys.readouterr().out.splitlines()[:40]
+    common = ["--env", "--algo", "--demos", "--num-demos", "--steps", "--preset", "--seed"]
+    common += ["--out", "--resume", "--config"]
+    for flag in common:
+        assert any(line.startswith(f"  {flag} ") for line in top), flag
+    from ilfo.training import TrainConfig
+
+    (steps,) = [line for line in top if line.startswith("  --steps N ")]
+    assert steps.endswith(f"(default {TrainConfig().steps:,})")  # read off the config
+    assert any("grouped by part" in line for line in top)

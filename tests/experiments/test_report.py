@@ -471,3 +471,46 @@ def test_a_one_seed_cell_claims_no_spread_or_interval(tmp_path):
     assert "±" not in " ".join(ilfo_columns) and "[0.97" not in hopper
     assert "within (1 seed: a single draw)" in hopper
     assert "0.85 ± 0.05 | 0.85 [" in walker and "1 seed" not in walker
+
+
+def test_a_profile_is_drawn_over_tasks_every_algo_drawn_has_runs_on(tmp_path):
+    """Each curve of a profile is over the same tasks: of the algos' task sets, the one most
+    (algo, task) pairs are drawn on; algos without runs on all its tasks are left out, and the
+    report says which, and on what they ran."""
+    from ilfo.experiments.report_figures import profile_selection
+
+    def runs(root, algo, envs):
+        for k, env in enumerate(envs):  # the report's order of tasks: its runs' (sorted) order
+            _fake_run(root, f"{algo}-{k}-{env}", env=env, algo=algo, seed=0, scores=[0.5])
+
+    three = ("Hopper-v5", "Walker2d-v5", "HalfCheetah-v5")
+    wide = tmp_path / "wide"
+    runs(wide, "oops-td3", three)
+    runs(wide, "pwil-td3", three)
+    runs(wide, "opolo", three[:2])
+    runs(wide, "sil", three[:1])
+    report = build_report(collect_runs([wide])[0], resamples=50)
+    chosen = profile_selection(report, 1)
+    # 2 algos x 3 tasks = 3 algos x 2 tasks: the more tasks; 4 x 1 fewer pairs.
+    assert chosen.tasks == three
+    assert [g[0] for g in chosen.groups] == ["oops-td3", "pwil-td3"]
+    assert {g[0]: envs for g, envs in chosen.left_out} == {
+        "opolo": three[:2],
+        "sil": three[:1],
+    }
+    assert chosen.tasks_left_out == ()
+    write_report(report, tmp_path / "wide-report")
+    text = (tmp_path / "wide-report" / "report.md").read_text()
+    assert (
+        "- Performance profile, 1 demo: over Hopper-v5, Walker2d-v5, HalfCheetah-v5, the algos "
+        "with runs on every one of them; left out: opolo, 1 demo (run on Hopper-v5, "
+        "Walker2d-v5); sil, 1 demo (run on Hopper-v5)." in text
+    )
+    # One algo on three tasks, three on two: the two tasks, all four algos, the third task out.
+    narrow = tmp_path / "narrow"
+    runs(narrow, "oops-td3", three)
+    for algo in ("pwil-td3", "opolo", "sil"):
+        runs(narrow, algo, three[:2])
+    chosen = profile_selection(build_report(collect_runs([narrow])[0], resamples=50), 1)
+    assert chosen.tasks == three[:2] and len(chosen.groups) == 4 and chosen.left_out == ()
+    assert chosen.tasks_left_out == ("HalfCheetah-v5",)

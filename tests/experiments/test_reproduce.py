@@ -64,18 +64,39 @@ def test_small_budget_of_oops_alone_takes_four_updates_per_step():
 
 
 def test_the_estimate_counts_updates_per_step():
-    from ilfo.experiments.reproduce import UPDATE_SHARE, Plan
+    from ilfo.experiments.reproduce import RUN_FIXED_CORE_SECONDS, UPDATE_SHARE, Plan
     from ilfo.experiments.sweep import SweepSpec
 
     def hours(algo, **config):
         spec = SweepSpec(algo=(algo,), config={"steps": 100_000, "preset": "fast", **config})
         return Plan("x", "small", {"x": spec}, ()).core_hours()
 
-    share = UPDATE_SHARE["fast"]
-    assert hours("oops-td3", updates_per_step=4) == pytest.approx(
-        hours("oops-td3") * (1 - share + 4 * share)
+    share, fixed = UPDATE_SHARE["fast"], RUN_FIXED_CORE_SECONDS / 3600
+    assert hours("oops-td3", updates_per_step=4) - fixed == pytest.approx(
+        (hours("oops-td3") - fixed) * (1 - share + 4 * share)
     )
     assert hours("oops-td3", updates_per_step=4) > 2.5 * hours("oops-td3")
+
+
+def test_the_estimate_counts_each_runs_fixed_cost():
+    """A run costs its start (compilation, envs, evaluations) whatever its steps: N runs' estimate
+    is N fixed costs above what their steps cost, which tiny runs' estimate is mostly; a run
+    trained to its end costs nothing more, one checkpointed on its way its start again."""
+    from ilfo.experiments.reproduce import RUN_FIXED_CORE_SECONDS, Plan
+    from ilfo.experiments.sweep import SweepSpec
+
+    def seconds(runs, steps, root=None):
+        spec = SweepSpec(algo=("oops-td3",), seed=tuple(range(runs)), config={"steps": steps})
+        return 3600 * Plan("x", "small", {"x": spec}, ()).core_hours(root)
+
+    for runs in (1, 4):
+        per_steps = seconds(runs, 2000) - seconds(runs, 1000)  # what 1,000 more steps add
+        assert per_steps > 0
+        fixed = seconds(runs, 1000) - per_steps  # the estimate at no steps
+        assert fixed >= runs * RUN_FIXED_CORE_SECONDS * (1 - 1e-9)
+    smoke = plan("table1", "smoke")
+    assert 3600 * smoke.core_hours() >= smoke.runs * RUN_FIXED_CORE_SECONDS
+    assert 3600 * smoke.core_hours() < 2 * smoke.runs * RUN_FIXED_CORE_SECONDS  # mostly fixed
 
 
 def test_the_estimate_counts_the_measures_of_final_rollouts():
@@ -104,7 +125,7 @@ def test_the_estimate_counts_the_measures_of_final_rollouts():
 def test_the_estimate_left_counts_checkpoints_and_kept_pairs(tmp_path):
     """What a directory already holds comes off the estimate: a run's steps up to its newest
     complete checkpoint, and the pairs of a measure kept (all of them once it is written)."""
-    from ilfo.experiments.reproduce import MEASURE_SECONDS_PER_PAIR
+    from ilfo.experiments.reproduce import MEASURE_SECONDS_PER_PAIR, RUN_FIXED_CORE_SECONDS
     from ilfo.training.run_dir import CHECKPOINT_FILES, REPLAY_OMITTED, SOLVERS_FILE
 
     solvers = plan("solvers", "small")
@@ -123,7 +144,10 @@ def test_the_estimate_left_counts_checkpoints_and_kept_pairs(tmp_path):
     checkpoint(100_000)
     checkpoint(200_000, complete=False)  # a damaged one does not count
     trained = dataclasses.replace(solvers, measures=())
-    assert trained.core_hours(tmp_path) == pytest.approx(trained.core_hours() * 2 / 3)
+    fixed = RUN_FIXED_CORE_SECONDS / 3600  # a resume starts the run again
+    assert trained.core_hours(tmp_path) == pytest.approx(
+        fixed + (trained.core_hours() - fixed) * 2 / 3
+    )
     partial = run_dir / ".solvers.partial.json"
     partial.write_text(json.dumps({"key": {}, "pairs": {str(i): {} for i in range(40)}}))
     per_pair = MEASURE_SECONDS_PER_PAIR["solvers"] / 3600
@@ -135,6 +159,8 @@ def test_the_estimate_left_counts_checkpoints_and_kept_pairs(tmp_path):
     assert solvers.measure_hours(tmp_path) == pytest.approx(100 * per_pair)
     (run_dir / SOLVERS_FILE).write_text(json.dumps({"key": {}, "values": {}}))
     assert solvers.measure_hours(tmp_path) == 0
+    checkpoint(run.steps)  # trained to its end: no start left to pay for
+    assert solvers.core_hours(tmp_path) == 0
 
 
 def test_table1_smoke_runs_into_a_report(tmp_path, capsys, monkeypatch):

@@ -28,7 +28,8 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         usage = self.format_usage()
-        if usage.count("\n") > USAGE_LINES_SHOWN_WITH_AN_ERROR:
+        # A usage given in words ("[options]": ``ilfo train``'s) says where the options are too.
+        if self.usage is not None or usage.count("\n") > USAGE_LINES_SHOWN_WITH_AN_ERROR:
             command = self.help_command or self.prog
             usage = f"usage: {self.prog} [options]  (all of them: {command} --help)\n"
         sys.stderr.write(usage)

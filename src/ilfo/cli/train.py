@@ -14,7 +14,7 @@ from ilfo.config import add_dataclass_arguments, flag_name, overrides_from_args
 
 if TYPE_CHECKING:
     from ilfo.algos import AgentPart
-    from ilfo.training import TrainConfig
+    from ilfo.training import DemoSource, TrainConfig
 
 
 def _add_train_parser(sub: argparse._SubParsersAction) -> None:
@@ -24,14 +24,8 @@ def _add_train_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "train",
         help="Train a policy (default: OOPS+TD3 on Hopper-v5 from one shipped expert demo).",
-        description=(
-            "Train a policy from state-only demonstrations (or on the task reward for td3/sac). "
-            "Writes runs/<env>__<algo>__<seed>__<time>/ with config.json, metrics.csv, tb/ "
-            "(TensorBoard), checkpoints/, policy.msgpack (the final policy), best_policy.msgpack "
-            "and best_policy.json (the best-evaluated one) and learning_curve.png. Ctrl-C "
-            "checkpoints; --resume RUN_DIR continues exactly where the run stopped. Every "
-            "setting, the agent's and the rewarder's included, is recorded in config.json."
-        ),
+        usage="%(prog)s [options]",  # the flags are too many to list: the description's first
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_dataclass_arguments(p, TrainConfig)
     p.add_argument(
@@ -58,7 +52,74 @@ def _add_train_parser(sub: argparse._SubParsersAction) -> None:
         add_dataclass_arguments(
             group, PART_CONFIGS[name], part.set_by_trainer, prefix=name, defaults=presets
         )
+    p.description = _train_description(p, dataclasses.asdict(TrainConfig()))
     p.set_defaults(run=_run_train)
+
+
+def bar_fields() -> str:
+    """What the progress bar's fields mean (``training.loop``'s ``_postfix`` sets them)."""
+    from ilfo.algos import ALGOS
+
+    task_reward = [name for name, recipe in ALGOS.items() if not recipe.imitation]
+    return (
+        "sps: steps/s of the last episode, updates included; proxy: the imitation reward's "
+        "return of the last training episode (the task reward's for "
+        f"{', '.join(task_reward)}); eval: the last evaluation's (normalised) score"
+    )
+
+
+TRAIN_DESCRIPTION = (
+    "Train a policy from state-only demonstrations (or on the task reward for td3/sac). "
+    "Writes runs/<env>__<algo>__<seed>__<time>/ with config.json, metrics.csv, tb/ "
+    "(TensorBoard), checkpoints/, policy.msgpack (the final policy), best_policy.msgpack "
+    "and best_policy.json (the best-evaluated one) and learning_curve.png. Ctrl-C "
+    "checkpoints; --resume RUN_DIR continues exactly where the run stopped. Every "
+    "setting, the agent's and the rewarder's included, is recorded in config.json."
+)
+
+COMMON_TRAIN_FLAGS: dict[str, str] = {
+    "--env ENV": "the task",
+    "--algo ALGO": "the algorithm, one of the choices below",
+    "--demos FILE.npz": "the demo file (none: the env's shipped expert demos)",
+    "--num-demos N": "how many of its demos to imitate (the first N)",
+    "--steps N": "environment steps in total",
+    "--preset {paper,fast}": "agent sizes: the paper's networks, or smaller",
+    "--seed N": "seed of everything",
+    "--out DIR": "where run directories go",
+    "--resume RUN_DIR": "continue a run from its last checkpoint",
+    "--config FILE.json": "start from a file's settings (a run's config.json)",
+}
+"""The options most runs set, listed first in ``ilfo train --help``, a short line each (with
+its default, read off the parser); their full help follows with the others."""
+
+
+def _train_description(parser: argparse.ArgumentParser, defaults: dict[str, Any]) -> str:
+    """The description, then ``COMMON_TRAIN_FLAGS`` as a short list (each checked to be one of
+    ``parser``'s flags; with its default from ``defaults``, by the flag's field), then where
+    the rest are."""
+    import textwrap
+
+    actions = {flag: action for action in parser._actions for flag in action.option_strings}
+    unknown = [name for name in COMMON_TRAIN_FLAGS if name.split()[0] not in actions]
+    if unknown:  # a renamed flag: the short list must not name one that is gone
+        raise AssertionError(f"COMMON_TRAIN_FLAGS names no flag of ilfo train: {unknown}")
+    width = max(len(name) for name in COMMON_TRAIN_FLAGS) + 2
+    lines = [textwrap.fill(TRAIN_DESCRIPTION, 78), "", "Common options:"]
+    for name, text in COMMON_TRAIN_FLAGS.items():
+        default = defaults.get(actions[name.split()[0]].dest)
+        if default is not None:
+            shown = f"{default:,}" if isinstance(default, int) else default
+            text += f" (default {shown})"
+        lines.append(f"  {name:<{width}}{text}")
+    lines += ["", textwrap.fill(f"The progress bar's fields: {bar_fields()}.", 78), ""]
+    lines.append(
+        textwrap.fill(
+            "All of the options follow: the run's own, then each agent's and reward's, "
+            "grouped by part (--td3-*, --oops-*, ...).",
+            78,
+        )
+    )
+    return "\n".join(lines)
 
 
 def _preset_defaults(part: AgentPart) -> dict[str, str] | None:
@@ -132,30 +193,74 @@ def _run_train(args: argparse.Namespace) -> int:
 
     overrides = overrides_from_args(args, TrainConfig)
     groups = part_flags(args)
+    progress = not args.no_progress
     if args.resume:
         extra = [flag_name(k) for k in overrides if k != "steps"]
         extra += [flag_name(k, name) for name, given in groups.items() for k in given]
         extra += ["--config"] * (args.config is not None)
         if extra:
             raise ValueError(f"--resume takes its config from the run; drop {', '.join(extra)}")
-        trainer = Trainer.resume(
-            args.resume, progress=not args.no_progress, steps=overrides.get("steps")
-        )
+        trainer = Trainer.resume(args.resume, progress=progress, steps=overrides.get("steps"))
     else:
         config = config_from_args(args.config, overrides, groups)
         run_dir = create_run_dir(config.out, run_name(config))  # new and empty, never shared
         try:
-            trainer = Trainer(config, run_dir, progress=not args.no_progress)
+            trainer = Trainer(config, run_dir, progress=progress)
         except BaseException:
             run_dir.rmdir()  # nothing was written: a failed start leaves no directory behind
             raise
     trainer.resume_command = f"{_command()} train --resume {shlex.quote(str(trainer.run_dir))}"
-    print(f"run directory: {trainer.run_dir}")
-    print(trainer.checkpoint_plan())
+    summary = start_summary(
+        trainer.config, trainer.run_dir, trainer.demo_source, trainer.step, progress=progress
+    )
+    print(f"{summary}\n  {trainer.checkpoint_plan()}")
     run_dir = trainer.train()
     final = trainer.last_eval
     print(f"done: {run_dir}  last evaluation: {json.dumps(final)}")
     return 0
+
+
+def start_summary(
+    config: TrainConfig,
+    run_dir: Path,
+    demos: DemoSource | None,
+    step: int = 0,
+    *,
+    progress: bool = False,
+) -> str:
+    """What ``ilfo train`` prints as it starts (or resumes at ``step``): the algo, env, preset
+    and seed, the demos, the steps, the expected duration where the algo has a measured rate
+    (``reproduce.run_core_seconds``, the one estimate of a run's compute), the run directory
+    and, with ``progress``, what the progress bar's fields mean."""
+    from ilfo.experiments.reproduce import run_core_seconds
+
+    lines = [f"{config.algo} on {config.env}, {config.preset} preset, seed {config.seed}"]
+    if demos is None:
+        lines.append(f"  demos: none ({config.algo} learns from the task reward)")
+    else:
+        first = "demo" if demos.num_demos == 1 else f"{demos.num_demos} demos"
+        lines.append(f"  demos: {demos.path} (its first {first})")
+    resumed = f", from step {step:,}" if step else ""
+    lines.append(f"  steps: {config.steps:,}{resumed}; evaluated every {config.eval_every:,}")
+    settings = {"algo": config.algo, "preset": config.preset}
+    seconds = run_core_seconds(
+        {**settings, "updates_per_step": config.updates_per_step}, config.steps - step
+    )
+    if seconds:
+        lines.append(
+            f"  expected: ~{_duration(seconds)} of one core (the measured rates of "
+            "docs/benchmarks.md; longer beside other work)"
+        )
+    lines.append(f"  writes: {run_dir}")
+    if progress:
+        lines.append(f"  progress bar: {bar_fields()}")
+    return "\n".join(lines)
+
+
+def _duration(seconds: float) -> str:
+    if seconds >= 5400:
+        return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 60:.0f} min" if seconds >= 90 else f"{seconds:.0f} s"
 
 
 def _add_eval_parser(sub: argparse._SubParsersAction) -> None:
@@ -205,7 +310,15 @@ def _run_eval(args: argparse.Namespace) -> int:
 
 
 def _add_plot_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("plot", help="Plot evaluation curves of runs (mean and spread over seeds).")
+    p = sub.add_parser(
+        "plot",
+        help="Plot evaluation curves of runs (mean and spread over seeds).",
+        description=(
+            "Plot evaluation curves of runs: the mean and min-max band over seeds, one curve per "
+            "env, algo, demos and settings (runs trained otherwise, e.g. at another --preset, are "
+            "separate curves, each label naming its settings)."
+        ),
+    )
     p.add_argument("run_dirs", nargs="+", help="run directories")
     p.add_argument(
         "--out", default="learning_curves.png", help="output image (default learning_curves.png)"

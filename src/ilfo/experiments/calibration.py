@@ -157,7 +157,7 @@ def write_calibration(results: dict[str, list[CalibrationPoint]], out: Path) -> 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ilfo.experiments.report import finish_figure
+    from ilfo.experiments.report_figures import finish_figure
 
     out.mkdir(parents=True, exist_ok=True)
     written = []

@@ -4,7 +4,7 @@ beside both, and learning curves and performance profiles as figures.
 
 ``collect_runs`` finds runs (sweep directories, run directories, or folders holding either);
 ``build_report`` groups them into cells; ``write_report`` writes ``report.md``, ``cells.csv``,
-``aggregates.csv`` and PNG figures.
+``aggregates.csv`` and PNG figures (``report_figures``).
 
 The final performance of a run is the paper's: its last evaluation (``eval_episodes``
 deterministic fixed-horizon episodes), normalised by the demos' mean return
@@ -15,7 +15,6 @@ paper does not say which it uses.
 from __future__ import annotations
 
 import csv
-import dataclasses
 import functools
 import json
 import math
@@ -28,7 +27,9 @@ from typing import Any
 import numpy as np
 
 from ilfo.experiments import stats
+from ilfo.experiments.report_figures import plot_curves, plot_profiles, profile_lines
 from ilfo.paper import PaperCell, paper_ablation, paper_score
+from ilfo.training.run_labels import run_variant, shared_settings, training_settings
 
 SCORE = "eval_score_norm"
 RETURN = "eval_return_norm"
@@ -133,104 +134,6 @@ def collect_runs(paths: Iterable[str | Path]) -> tuple[list[RunResult], list[str
     return runs, skipped
 
 
-def _contact_forces_variant(config: dict[str, Any]) -> str | None:
-    """ "contact-forces" or "no-contact-forces" for a run that observed Ant's or Humanoid's
-    contact forces otherwise than ``ilfo train``'s default for its algo, else None. A config
-    without the setting predates it, when every run observed them."""
-    from ilfo.algos import ALGOS
-    from ilfo.envs.make import CONTACT_FORCE_DIMS
-    from ilfo.training.config import default_contact_forces
-
-    env, algo = config.get("env"), config.get("algo")
-    if env not in CONTACT_FORCE_DIMS or algo not in ALGOS:
-        return None
-    default = default_contact_forces(env, ALGOS[algo].imitation)
-    observed = config.get("contact_forces", True)
-    observed = default if observed is None else bool(observed)
-    if observed == default:
-        return None
-    return "contact-forces" if observed else "no-contact-forces"
-
-
-def _reward_settings_variant(config: dict[str, Any], source: Path) -> str | None:
-    """For a run of an imitation algo, the settings of its reward in which it differs from the
-    algo's defaults for its env, as "pwil.subsample=20+pwil.kernel_dim=23"; None where it has
-    none (the seed, which the trainer sets, is not a setting). A setting a config predates
-    reads back as its default."""
-    from ilfo.algos import ALGOS, REWARD_PARTS
-    from ilfo.training.config import TrainConfig, config_from_dict
-
-    recipe = ALGOS.get(str(config.get("algo")))
-    if recipe is None or recipe.reward is None:
-        return None
-    run = config_from_dict(config, source)
-    default = TrainConfig(env=run.env, algo=run.algo, seed=run.seed)
-    given, usual = run.part_config(recipe.reward), default.part_config(recipe.reward)
-    set_by_trainer = REWARD_PARTS[recipe.reward].set_by_trainer
-    changed = [
-        f"{recipe.reward}.{f.name}={_setting_label(getattr(given, f.name))}"
-        for f in dataclasses.fields(given)
-        if f.name not in set_by_trainer and getattr(given, f.name) != getattr(usual, f.name)
-    ]
-    return "+".join(changed) or None
-
-
-def _training_settings(config: dict[str, Any], source: Path) -> tuple[str, ...]:
-    """Labels of a run's training settings that differ from ``ilfo train``'s defaults for its
-    env and algo: the preset, steps, updates per step, episodes, and its agent's fields. A
-    config this version cannot read raises (the report leaves the run out and says why)."""
-    from ilfo.algos import AGENT_PARTS
-    from ilfo.training.config import TrainConfig, config_from_dict, preset_changes_agent
-
-    run = config_from_dict(config, source)
-    default = TrainConfig(env=run.env, algo=run.algo, seed=run.seed)
-    agent = run.recipe.agent
-    # Agents are compared as runs build them (config.json records them so: DDPG's TD3 changes,
-    # the time augmentation of fixed-horizon runs), at the run's preset and episodes, which
-    # their own labels name; the preset only where it changes the agent (not SAC, OPOLO or the
-    # authors' settings of f-IRL and GAIfO).
-    horizon = run.horizon or 1000
-    alike = dataclasses.replace(default, preset=run.preset, fixed_horizon=run.uses_fixed_horizon)
-    labels = []
-    if run.preset != default.preset and preset_changes_agent(alike, horizon):
-        labels.append(f"{run.preset} preset")
-    if run.steps != default.steps:
-        labels.append(f"{_steps_label(run.steps)} steps")
-    if run.updates_per_step != default.updates_per_step:
-        labels.append(f"{run.updates_per_step} updates/step")
-    if run.uses_fixed_horizon != default.uses_fixed_horizon:
-        labels.append("fixed horizon" if run.uses_fixed_horizon else "standard episodes")
-    replay = () if AGENT_PARTS[agent].on_policy else ("random_steps", "replay_capacity")
-    for name in (*replay, "horizon", "healthy_angle_range"):
-        if getattr(run, name) != getattr(default, name):
-            labels.append(f"{name}={_setting_label(getattr(run, name))}")
-    if run.eval_episodes != default.eval_episodes:
-        labels.append(f"{run.eval_episodes} evaluation episodes")
-    given, usual = run.agent_config(horizon), alike.agent_config(horizon)
-    set_by_trainer = AGENT_PARTS[agent].set_by_trainer
-    labels += [
-        f"{agent}.{f.name}={_setting_label(getattr(given, f.name))}"
-        for f in dataclasses.fields(given)
-        if f.name not in set_by_trainer and getattr(given, f.name) != getattr(usual, f.name)
-    ]
-    return tuple(labels)
-
-
-def _steps_label(steps: int) -> str:
-    for size, suffix in ((1_000_000, "M"), (1_000, "k")):
-        if steps >= size and steps % (size // 100) == 0:
-            return f"{steps / size:g}{suffix}"
-    return str(steps)
-
-
-def _setting_label(value: Any) -> str:
-    if isinstance(value, float):
-        return format(value, "g")
-    if isinstance(value, tuple | list):
-        return "-".join(map(_setting_label, value))
-    return str(value)
-
-
 def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | None:
     """A run's evaluations (None if it has none with a normalised score yet)."""
     from ilfo.training import read_metrics, read_run_config
@@ -245,10 +148,7 @@ def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | Non
     )
     # Runs that observed otherwise than the default are not its cell (nor a sweep variant's),
     # nor are runs whose reward differs from the algo's (a sweep's variant already says how).
-    if variant is None:
-        variant = _reward_settings_variant(config, run_dir / "config.json")
-    labels = (variant, _contact_forces_variant(config))
-    variant = "+".join(label for label in labels if label) or None
+    variant = run_variant(config, run_dir / "config.json", variant)
     if not (run_dir / "metrics.csv").is_file():  # a sweep's run before its first episode
         return None
     all_rows = read_metrics(run_dir)
@@ -267,7 +167,7 @@ def read_run(run_dir: str | Path, variant: str | None = None) -> RunResult | Non
         curve_scores=np.array([float(r[SCORE]) for r in rows]),
         final_return=float(rows[-1][RETURN]) if rows[-1].get(RETURN) else math.nan,
         shipped_demos=shipped,
-        settings=_training_settings(config, run_dir / "config.json"),
+        settings=training_settings(config, run_dir / "config.json"),
         trained_step=int(all_rows[-1]["step"]),
     )
 
@@ -359,8 +259,7 @@ class Cell:
     @property
     def settings(self) -> tuple[str, ...]:
         """The training settings, other than the defaults, that all its runs share."""
-        shared = set.intersection(*(set(r.settings) for r in self.runs))
-        return tuple(label for label in self.runs[0].settings if label in shared)
+        return shared_settings([r.settings for r in self.runs])
 
     @property
     def mixed_settings(self) -> dict[str, tuple[int, ...]]:
@@ -517,10 +416,6 @@ def _fmt(value: float | None, digits: int = 2) -> str:
     return "" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
 
 
-def _label(algo: str, num_demos: int, variant: str | None) -> str:
-    return f"{algo}{f' [{variant}]' if variant else ''}, {num_demos} demo{'s' * (num_demos > 1)}"
-
-
 def _seeds_text(cell: Cell) -> str:
     unfinished = [r for r in cell.runs if not r.finished]
     text = str(len(cell.runs))
@@ -665,7 +560,7 @@ def write_report(report: Report, out: str | Path, *, sources: Sequence[str] = ()
                 writer.writeheader()
                 writer.writerows(rows)
         written.append(path)
-    figures = _plot_curves(report, out) + _plot_profiles(report, out)
+    figures = plot_curves(report, out) + plot_profiles(report, out)
     lines = [
         "# ilfo report",
         "",
@@ -759,85 +654,8 @@ def write_report(report: Report, out: str | Path, *, sources: Sequence[str] = ()
     if report.skipped:
         lines += ["", "## Left out", ""] + [f"- {s}" for s in report.skipped]
     if figures:
-        lines += ["", "## Figures", ""] + [f"![{p.stem}]({p.name})" for p in figures]
+        lines += ["", "## Figures", "", *profile_lines(report), ""]
+        lines += [f"![{p.stem}]({p.name})" for p in figures]
     path = out / "report.md"
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return [path, *written, *figures]
-
-
-def _curve_band(run_results: Sequence[RunResult], resamples: int):
-    """Common steps, the mean over seeds and its pointwise 95% bootstrap band."""
-    last = min(r.final_step for r in run_results)
-    steps = run_results[0].curve_steps[run_results[0].curve_steps <= last]
-    values = np.stack([np.interp(steps, r.curve_steps, r.curve_scores) for r in run_results])
-    mean = values.mean(axis=0)
-    if len(run_results) < 2:
-        return steps, mean, mean, mean
-    rng = np.random.default_rng(0)
-    picks = rng.integers(0, len(run_results), size=(resamples, len(run_results)))
-    means = values[picks].mean(axis=1)
-    low, high = np.percentile(means, [2.5, 97.5], axis=0)
-    return steps, mean, low, high
-
-
-def _plot_curves(report: Report, out: Path) -> list[Path]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figures = []
-    for env in dict.fromkeys(c.env for c in report.cells):
-        fig, ax = plt.subplots(figsize=(6, 4))
-        for c in (c for c in report.cells if c.env == env):
-            steps, mean, low, high = _curve_band(c.runs, min(report.resamples, 1000))
-            n = len(c.runs)
-            label = f"{_label(c.algo, c.num_demos, c.variant)} ({n} seed{'s' if n != 1 else ''})"
-            ax.plot(steps, mean, label=label)
-            ax.fill_between(steps, low, high, alpha=0.2)
-        title = f"{env}: mean over seeds, 95% bootstrap band"
-        path = out / f"curves_{env}.png"
-        figures.append(finish_figure(fig, ax, title, "environment steps", "normalised score", path))
-    return figures
-
-
-def finish_figure(fig: Any, ax: Any, title: str, xlabel: str, ylabel: str, path: Path) -> Path:
-    """Label, save and close a report figure (every figure of ``ilfo report`` and
-    ``ilfo reproduce``)."""
-    import matplotlib.pyplot as plt
-
-    ax.set_title(title)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
-def _plot_profiles(report: Report, out: Path) -> list[Path]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figures = []
-    taus = np.linspace(0.0, 1.25, 101)
-    for demos in sorted({c.num_demos for c in report.cells}):
-        groups = [g for g in report.groups() if g[1] == demos]
-        fig, ax = plt.subplots(figsize=(6, 4))
-        for algo, _, variant in groups:
-            envs = report.envs_of(algo, demos, variant)
-            scores = report.task_scores(algo, demos, variant, envs)
-            profile, low, high = stats.performance_profile_band(
-                scores, taus, resamples=min(report.resamples, 1000)
-            )
-            ax.plot(taus, profile, label=f"{_label(algo, demos, variant)} ({len(envs)} tasks)")
-            ax.fill_between(taus, low, high, alpha=0.2)
-        title = f"Performance profile, {demos} demo{'s' * (demos > 1)}"
-        path = out / f"profile_{demos}demos.png"
-        ylabel = "fraction of runs with score > tau"
-        figures.append(finish_figure(fig, ax, title, "normalised score tau", ylabel, path))
-    return figures

@@ -21,7 +21,7 @@ experiment once their algo name is in ``ilfo.algos``.
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -102,6 +102,17 @@ updates were 96% of a step). N updates per step cost (1 - share) + share * N tim
 Measured on TD3 and used for every off-policy algo: an algo whose step goes more to its reward
 (oops-adv-td3, opolo) is costed a little high."""
 
+RUN_FIXED_CORE_SECONDS = 32.0
+"""For the estimate only: one core's seconds that a run costs whatever its steps (each start
+of one, a resume included): its process's imports, its envs and demos, JAX's compilation of
+its programs and what else does not scale with its steps; nearly all of a tiny run. Measured
+on one smoke run (``SMOKE_CONFIG``: 400 steps, two evaluations of one 100-step episode) of
+oops-td3 on Hopper, ``ilfo train`` with ``ILFO_COMPILATION_CACHE=off`` (a first run's
+compilation): 33.7 s of CPU time, user and system (92 s wall beside two pinned runs), less
+its 400 steps at ``STEPS_PER_CORE_SECOND`` (1.3 s); 2026-12-07, the 2-core Intel Xeon
+machine. Algos that compile more programs (opolo, firl-fkl) likely cost more, a start that
+finds its programs in the compilation cache less."""
+
 MEASURE_SECONDS_PER_PAIR: dict[str, float] = {"distances": 0.6, "solvers": 45.0}
 """For the estimate only: one core's seconds per (final rollout, expert trajectory) pair of
 each measure, on Hopper and Walker2d (2026-12-06, beside one or two training runs): Table 3's
@@ -164,25 +175,22 @@ class Plan:
         return seconds / 3600
 
     def core_hours(self, root: Path | None = None) -> float:
-        """Estimated core-hours at the measured rates (``STEPS_PER_CORE_SECOND``), the
-        measures included. With ``root``, the experiment's directory, only what is left: the
-        steps past each run's newest checkpoint (what a resume continues from) and the
-        measures' pairs not kept."""
+        """Estimated core-hours at the measured rates (``STEPS_PER_CORE_SECOND``) with each
+        run's fixed cost (``RUN_FIXED_CORE_SECONDS``), the measures included. With ``root``,
+        the experiment's directory, only what is left: the steps past each run's newest
+        checkpoint (what a resume continues from, paying the fixed cost again; a finished
+        run none) and the measures' pairs not kept."""
         from ilfo.training.run_dir import checkpoint_steps
 
         seconds = 3600 * self.measure_hours(root)
         for sub, spec in self.sweeps.items():
             for run in expand(spec):
-                rate = STEPS_PER_CORE_SECOND.get(run.config["algo"], 100.0)
-                if run.config.get("preset") == "paper" and _preset_changes_agent(
-                    run.config["algo"]
-                ):
-                    rate /= 3
                 steps = run.steps
                 if root is not None:
                     kept = checkpoint_steps(root / sub / RUNS_DIR / run.name)
                     steps -= min(kept[-1][0], run.steps) if kept else 0
-                seconds += steps / rate * _updates_cost(run.config)
+                estimate = run_core_seconds(run.config, steps, unmeasured_rate=100.0)
+                seconds += estimate or 0.0  # never None: unmeasured_rate stands in
         if self.calibration is not None:  # ~1,500 env + policy steps/s and ~0.1 s per solve
             cal = self.calibration
             seconds += cal.rollouts * ((cal.horizon or 1000) / 1500 + 0.1)
@@ -238,7 +246,27 @@ def _pairs_kept(run_dir: Path, measure: str, total: int) -> int:
     return 0 if partial is None else min(total, len(partial[1]))
 
 
-def _updates_cost(config: dict[str, Any]) -> float:
+def run_core_seconds(
+    config: Mapping[str, Any], steps: int, *, unmeasured_rate: float | None = None
+) -> float | None:
+    """One core's estimated seconds for ``steps`` steps of a run with ``config``'s algo,
+    preset and updates per step (a sweep's settings, ``ilfo train``'s defaults where absent):
+    its fixed cost (``RUN_FIXED_CORE_SECONDS``) and its steps at ``STEPS_PER_CORE_SECOND``,
+    a third of it at the paper preset where that changes the agent, times ``UPDATE_SHARE``'s
+    cost of more updates per step. 0 for no steps; None for an algo without a measured rate,
+    unless ``unmeasured_rate`` (steps/s at the fast preset) stands in for one."""
+    algo = config["algo"]
+    rate = STEPS_PER_CORE_SECOND.get(algo, unmeasured_rate)
+    if steps <= 0:
+        return 0.0
+    if rate is None:
+        return None
+    if config.get("preset", "paper") == "paper" and _preset_changes_agent(algo):
+        rate /= 3
+    return RUN_FIXED_CORE_SECONDS + steps / rate * _updates_cost(config)
+
+
+def _updates_cost(config: Mapping[str, Any]) -> float:
     """How many times a step at one update per step a run's step costs (``UPDATE_SHARE``)."""
     updates = config.get("updates_per_step", 1)
     if updates == 1 or _on_policy(config["algo"]):
@@ -656,7 +684,7 @@ def write_solvers(
     import matplotlib.pyplot as plt
 
     from ilfo.experiments.distances import SOLVER_LAMBDAS, solver_costs
-    from ilfo.experiments.report import finish_figure
+    from ilfo.experiments.report_figures import finish_figure
     from ilfo.training.run_dir import SOLVERS_FILE
 
     runs, unfinished = _finished(runs)

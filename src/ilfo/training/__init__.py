@@ -12,7 +12,8 @@ Modules: ``config`` (``TrainConfig``), ``build`` (demos, agent, reward and envir
 config, through the registry ``ilfo.algos``), ``rollout`` (episodes of a policy and their scores;
 the one home of the time feature), ``loop`` (``Trainer``, ``LoopHooks``), ``checkpoint``,
 ``metrics`` (metrics.csv and TensorBoard), ``run_dir`` (the rules of a run directory and the one
-reader of its policy), ``plots``.
+reader of its policy), ``run_labels`` (how a run was trained otherwise than the defaults),
+``plots``.
 """
 
 from ilfo.training.build import (

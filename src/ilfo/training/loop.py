@@ -142,6 +142,7 @@ class Trainer:
         self.policy_changed = True
         self.refill_until = 0
         """Updates wait until this step (a run continued from a snapshot refills its buffer)."""
+        self._bar: Any = None  # the progress bar while ``train`` runs: ``_collect`` moves it
 
     def checkpoint_plan(self) -> str:
         """Where and when this run checkpoints, in words (the CLI prints it at the start)."""
@@ -210,7 +211,7 @@ class Trainer:
         """Episodes until ``config.steps``, checkpointing by steps and by the clock; the first
         Ctrl-C (or SIGTERM) stops at the next episode boundary with a checkpoint."""
         cfg = self.config
-        bar = _progress_bar(cfg.steps, self.step, self.progress)
+        bar = self._bar = _progress_bar(cfg.steps, self.step, self.progress)
         start_wall = time.perf_counter() - self.elapsed
         next_checkpoint = (self.step // cfg.checkpoint_every + 1) * cfg.checkpoint_every
         # The step of the newest checkpoint; None before the first (a second Ctrl-C can come
@@ -359,7 +360,12 @@ class Trainer:
         step_keys = np.asarray(jax.random.split(explore_key, self.horizon))
         policy = policy_of(self.state)  # frozen for the episode; few leaves: fast dispatch
         time_feature, terminated = self.agent.time_feature, False
+        # The bar moves ten times an episode as it is collected (the updates follow it as
+        # compiled chunks, which it waits for); the loop catches it up at the episode's end.
+        bar_every = max(1, self.horizon // 10)
         for t in range(self.horizon):
+            if t and t % bar_every == 0 and self._bar is not None:
+                self._bar.update(bar_every)
             if random_phase:
                 action = rng.uniform(-self.max_action, self.max_action, self.action_dim)
             else:
@@ -598,7 +604,9 @@ def _progress_bar(total: int, initial: int, enabled: bool) -> Any:
         disable=not enabled,
         unit="step",
         dynamic_ncols=True,
-        smoothing=0.1,
+        # The average rate: the bar moves fast while an episode is collected and waits for its
+        # updates, and a moving average of those bursts would promise too early an end.
+        smoothing=0.0,
     )
 
 
