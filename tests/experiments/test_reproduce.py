@@ -64,7 +64,8 @@ def test_small_budget_of_oops_alone_takes_four_updates_per_step():
 
 
 def test_the_estimate_counts_updates_per_step():
-    from ilfo.experiments.reproduce import RUN_FIXED_CORE_SECONDS, UPDATE_SHARE, Plan
+    from ilfo.experiments.estimates import RUN_FIXED_CORE_SECONDS, UPDATE_SHARE
+    from ilfo.experiments.reproduce import Plan
     from ilfo.experiments.sweep import SweepSpec
 
     def hours(algo, **config):
@@ -82,7 +83,8 @@ def test_the_estimate_counts_each_runs_fixed_cost():
     """A run costs its start (compilation, envs, evaluations) whatever its steps: N runs' estimate
     is N fixed costs above what their steps cost, which tiny runs' estimate is mostly; a run
     trained to its end costs nothing more, one checkpointed on its way its start again."""
-    from ilfo.experiments.reproduce import RUN_FIXED_CORE_SECONDS, Plan
+    from ilfo.experiments.estimates import RUN_FIXED_CORE_SECONDS
+    from ilfo.experiments.reproduce import Plan
     from ilfo.experiments.sweep import SweepSpec
 
     def seconds(runs, steps, root=None):
@@ -101,7 +103,7 @@ def test_the_estimate_counts_each_runs_fixed_cost():
 
 def test_the_estimate_counts_the_measures_of_final_rollouts():
     """The solver figure's 100 pairs a run take about as long as a 300k-step run trains."""
-    from ilfo.experiments.reproduce import MEASURE_SECONDS_PER_PAIR
+    from ilfo.experiments.estimates import MEASURE_SECONDS_PER_PAIR
 
     solvers, table3 = plan("solvers", "small"), plan("table3", "small")
     assert solvers.measure_hours() == pytest.approx(
@@ -125,7 +127,7 @@ def test_the_estimate_counts_the_measures_of_final_rollouts():
 def test_the_estimate_left_counts_checkpoints_and_kept_pairs(tmp_path):
     """What a directory already holds comes off the estimate: a run's steps up to its newest
     complete checkpoint, and the pairs of a measure kept (all of them once it is written)."""
-    from ilfo.experiments.reproduce import MEASURE_SECONDS_PER_PAIR, RUN_FIXED_CORE_SECONDS
+    from ilfo.experiments.estimates import MEASURE_SECONDS_PER_PAIR, RUN_FIXED_CORE_SECONDS
     from ilfo.training.run_dir import CHECKPOINT_FILES, REPLAY_OMITTED, SOLVERS_FILE
 
     solvers = plan("solvers", "small")

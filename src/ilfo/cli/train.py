@@ -230,9 +230,9 @@ def start_summary(
 ) -> str:
     """What ``ilfo train`` prints as it starts (or resumes at ``step``): the algo, env, preset
     and seed, the demos, the steps, the expected duration where the algo has a measured rate
-    (``reproduce.run_core_seconds``, the one estimate of a run's compute), the run directory
+    (``estimates.run_core_seconds``, the one estimate of a run's compute), the run directory
     and, with ``progress``, what the progress bar's fields mean."""
-    from ilfo.experiments.reproduce import run_core_seconds
+    from ilfo.experiments.estimates import run_core_seconds
 
     lines = [f"{config.algo} on {config.env}, {config.preset} preset, seed {config.seed}"]
     if demos is None:

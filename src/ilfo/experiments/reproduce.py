@@ -20,12 +20,12 @@ experiment once their algo name is in ``ilfo.algos``.
 
 from __future__ import annotations
 
-import functools
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+from ilfo.experiments.estimates import MEASURE_SECONDS_PER_PAIR, is_on_policy, run_core_seconds
 from ilfo.experiments.sweep import RUNS_DIR, SweepSpec, expand
 
 if TYPE_CHECKING:
@@ -75,50 +75,6 @@ the variants would be compared on plateaus; with four, 0.85 +- 0.26, seven of ei
 (docs/benchmarks.md, "updates per step"), at about three times the compute per step.
 On-policy algos (sil) keep one: ``updates_per_step`` does not apply to them."""
 FULL_CONFIG: dict[str, Any] = {"steps": 1_000_000, "preset": "paper"}
-
-STEPS_PER_CORE_SECOND: dict[str, float] = {
-    "oops-td3": 300.0,
-    "oops-ddpg": 300.0,
-    "oops-sac": 120.0,
-    "pwil-td3": 300.0,
-    "gaifo-td3": 92.0,
-    "opolo": 70.0,
-    "firl-fkl": 77.0,
-    "oops-adv-td3": 140.0,
-    "sil": 300.0,
-}
-"""For the estimate only, steps per second of one core at the fast preset. oops-td3, oops-ddpg
-and pwil-td3: the 8-task sweep's 1M-step Walker2d runs, each pinned to one core beside another
-run, evaluations included (52 and 50 min: 320 and 332 steps/s, 2026-12-04, docs/benchmarks.md,
-"OOPS+TD3 and PWIL-(s) on the eight tasks"); the others
-half the 2-core loop rates of ``bench/train.py`` (docs/benchmarks.md, 2026-12-01; Hopper), and
-oops-adv-td3 and sil from short probes on Hopper (2026-12-02), so likely on the low side. The
-paper preset runs at about a third of the fast one."""
-UPDATE_SHARE: dict[str, float] = {"fast": 0.7, "paper": 0.96}
-"""For the estimate only: the share of an off-policy step's time spent in its update at one
-update per step, by preset (``bench/train.py``, docs/benchmarks.md: at the fast preset the loop
-ran 1070, 624 and 361 steps/s at one, two and four updates per step; at the paper preset the
-updates were 96% of a step). N updates per step cost (1 - share) + share * N times as much.
-Measured on TD3 and used for every off-policy algo: an algo whose step goes more to its reward
-(oops-adv-td3, opolo) is costed a little high."""
-
-RUN_FIXED_CORE_SECONDS = 32.0
-"""For the estimate only: one core's seconds that a run costs whatever its steps (each start
-of one, a resume included): its process's imports, its envs and demos, JAX's compilation of
-its programs and what else does not scale with its steps; nearly all of a tiny run. Measured
-on one smoke run (``SMOKE_CONFIG``: 400 steps, two evaluations of one 100-step episode) of
-oops-td3 on Hopper, ``ilfo train`` with ``ILFO_COMPILATION_CACHE=off`` (a first run's
-compilation): 33.7 s of CPU time, user and system (92 s wall beside two pinned runs), less
-its 400 steps at ``STEPS_PER_CORE_SECOND`` (1.3 s); 2026-12-07, the 2-core Intel Xeon
-machine. Algos that compile more programs (opolo, firl-fkl) likely cost more, a start that
-finds its programs in the compilation cache less."""
-
-MEASURE_SECONDS_PER_PAIR: dict[str, float] = {"distances": 0.6, "solvers": 45.0}
-"""For the estimate only: one core's seconds per (final rollout, expert trajectory) pair of
-each measure, on Hopper and Walker2d (2026-12-06, beside one or two training runs): Table 3's
-three exact solves, with the rollouts, 0.5-1.2 s a pair (0.6 on average over the small
-budget's six runs of 100 pairs, 47-120 s a run); the solver figure's nine solves (three
-Sinkhorn ones to their 20,000-iteration cap) about 50 s a pair (docs/experiments.md)."""
 
 
 @dataclass(frozen=True)
@@ -175,9 +131,9 @@ class Plan:
         return seconds / 3600
 
     def core_hours(self, root: Path | None = None) -> float:
-        """Estimated core-hours at the measured rates (``STEPS_PER_CORE_SECOND``) with each
-        run's fixed cost (``RUN_FIXED_CORE_SECONDS``), the measures included. With ``root``,
-        the experiment's directory, only what is left: the steps past each run's newest
+        """Estimated core-hours at the measured rates (``estimates.run_core_seconds``: each
+        run's steps and its fixed cost), the measures included. With ``root``, the
+        experiment's directory, only what is left: the steps past each run's newest
         checkpoint (what a resume continues from, paying the fixed cost again; a finished
         run none) and the measures' pairs not kept."""
         from ilfo.training.run_dir import checkpoint_steps
@@ -244,51 +200,6 @@ def _pairs_kept(run_dir: Path, measure: str, total: int) -> int:
         return total
     partial = _read_kept(run_dir / partial_measure_file(name), "pairs")
     return 0 if partial is None else min(total, len(partial[1]))
-
-
-def run_core_seconds(
-    config: Mapping[str, Any], steps: int, *, unmeasured_rate: float | None = None
-) -> float | None:
-    """One core's estimated seconds for ``steps`` steps of a run with ``config``'s algo,
-    preset and updates per step (a sweep's settings, ``ilfo train``'s defaults where absent):
-    its fixed cost (``RUN_FIXED_CORE_SECONDS``) and its steps at ``STEPS_PER_CORE_SECOND``,
-    a third of it at the paper preset where that changes the agent, times ``UPDATE_SHARE``'s
-    cost of more updates per step. 0 for no steps; None for an algo without a measured rate,
-    unless ``unmeasured_rate`` (steps/s at the fast preset) stands in for one."""
-    algo = config["algo"]
-    rate = STEPS_PER_CORE_SECOND.get(algo, unmeasured_rate)
-    if steps <= 0:
-        return 0.0
-    if rate is None:
-        return None
-    if config.get("preset", "paper") == "paper" and _preset_changes_agent(algo):
-        rate /= 3
-    return RUN_FIXED_CORE_SECONDS + steps / rate * _updates_cost(config)
-
-
-def _updates_cost(config: Mapping[str, Any]) -> float:
-    """How many times a step at one update per step a run's step costs (``UPDATE_SHARE``)."""
-    updates = config.get("updates_per_step", 1)
-    if updates == 1 or _on_policy(config["algo"]):
-        return 1.0
-    share = UPDATE_SHARE[config.get("preset", "paper")]
-    return (1 - share) + share * updates
-
-
-@functools.cache
-def _preset_changes_agent(algo: str) -> bool:
-    """Whether ``--preset`` changes the algo's agent (TD3 and DDPG's critics; not SAC, OPOLO or
-    the baselines' authors' settings), so that the paper preset runs slower than the rates."""
-    from ilfo.algos import ALGOS
-    from ilfo.training.config import TrainConfig, preset_changes_agent
-
-    return algo in ALGOS and preset_changes_agent(TrainConfig(algo=algo))
-
-
-def _on_policy(algo: str) -> bool:
-    from ilfo.algos import AGENT_PARTS, ALGOS
-
-    return algo in ALGOS and AGENT_PARTS[ALGOS[algo].agent].on_policy
 
 
 def _built(algos: tuple[str, ...]) -> tuple[tuple[str, ...], list[str]]:
@@ -370,8 +281,8 @@ def _table4(budget: Budget) -> Plan:
     }
     algos, not_built = _built(TABLE4_ALGOS)
     left_out[:0] = not_built
-    off_policy = tuple(a for a in algos if not _on_policy(a))
-    on_policy = tuple(a for a in algos if _on_policy(a))
+    off_policy = tuple(a for a in algos if not is_on_policy(a))
+    on_policy = tuple(a for a in algos if is_on_policy(a))
     if off_policy:
         sweeps["algos"] = SweepSpec(algo=off_policy, config=config, **axes)
     if on_policy:  # SIL's TRPO: the same runs, but updates per step do not apply to it
