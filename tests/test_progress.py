@@ -33,7 +33,7 @@ def test_the_bar_moves_within_an_episode_and_ends_at_the_steps(tmp_path, monkeyp
         bars.append(_Bar(total, initial, enabled))
         return bars[-1]
 
-    monkeypatch.setattr("ilfo.training.loop._progress_bar", make_bar)
+    monkeypatch.setattr("ilfo.training.loop.progress_bar", make_bar)
     # 200 random steps, two 100-step episodes: nothing to compile but the evaluation's policy.
     config = TrainConfig(**{**TINY_RUN, "steps": 200})
     Trainer(config, tmp_path / "run").train()

@@ -57,7 +57,7 @@ def _add_train_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def bar_fields() -> str:
-    """What the progress bar's fields mean (``training.loop``'s ``_postfix`` sets them)."""
+    """What the progress bar's fields mean (``training.console.bar_postfix`` sets them)."""
     from ilfo.algos import ALGOS
 
     task_reward = [name for name, recipe in ALGOS.items() if not recipe.imitation]

@@ -14,10 +14,8 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
-import signal
 import time
 import warnings
-from collections.abc import Iterator
 from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
@@ -43,6 +41,7 @@ from ilfo.training.checkpoint import (
     save_checkpoint,
 )
 from ilfo.training.config import TrainConfig, config_from_dict
+from ilfo.training.console import bar_postfix, progress_bar, stop_requests
 from ilfo.training.learners import Learner, learner_of
 from ilfo.training.metrics import MetricsLog, truncate_metrics
 from ilfo.training.plots import plot_runs
@@ -211,7 +210,7 @@ class Trainer:
         """Episodes until ``config.steps``, checkpointing by steps and by the clock; the first
         Ctrl-C (or SIGTERM) stops at the next episode boundary with a checkpoint."""
         cfg = self.config
-        bar = self._bar = _progress_bar(cfg.steps, self.step, self.progress)
+        bar = self._bar = progress_bar(cfg.steps, self.step, self.progress)
         start_wall = time.perf_counter() - self.elapsed
         next_checkpoint = (self.step // cfg.checkpoint_every + 1) * cfg.checkpoint_every
         # The step of the newest checkpoint; None before the first (a second Ctrl-C can come
@@ -220,7 +219,7 @@ class Trainer:
         last_checkpoint_time = time.monotonic()
         checkpoint_seconds = 60.0 * cfg.checkpoint_minutes or math.inf
         try:
-            with _stop_requests() as stop:
+            with stop_requests() as stop:
                 while self.step < cfg.steps:
                     t0 = time.perf_counter()
                     row = self._episode()
@@ -231,7 +230,7 @@ class Trainer:
                     self.hooks.episode_ended(self, row)
                     fault_point("episode_end")
                     bar.update(self.step - bar.n)
-                    bar.set_postfix(_postfix(row, self.last_eval), refresh=False)
+                    bar.set_postfix(bar_postfix(row, self.last_eval), refresh=False)
                     if (
                         self.step >= next_checkpoint
                         or self.step >= cfg.steps
@@ -561,59 +560,3 @@ class Trainer:
         import flax.serialization
 
         write_bytes_atomic(self.run_dir / name, flax.serialization.to_bytes(policy_of(self.state)))
-
-
-class _StopRequest:
-    """Set by the first Ctrl-C or SIGTERM; the loop stops at the next episode boundary."""
-
-    requested = False
-
-
-@contextlib.contextmanager
-def _stop_requests() -> Iterator[_StopRequest]:
-    """The first SIGINT/SIGTERM asks the loop to checkpoint and stop after the current episode
-    (a run is consistent only between episodes); the second raises KeyboardInterrupt at once."""
-    stop = _StopRequest()
-
-    def handler(signum: int, frame: Any) -> None:
-        if stop.requested:
-            raise KeyboardInterrupt
-        stop.requested = True
-        print("\nstopping after this episode (Ctrl-C again to quit at once)", flush=True)
-
-    previous = {}
-    try:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            previous[sig] = signal.getsignal(sig)
-            signal.signal(sig, handler)
-    except ValueError:  # not the main thread: signals keep their default behaviour
-        previous = {}
-    try:
-        yield stop
-    finally:
-        for sig, old in previous.items():
-            signal.signal(sig, old)
-
-
-def _progress_bar(total: int, initial: int, enabled: bool) -> Any:
-    from tqdm import tqdm
-
-    return tqdm(
-        total=total,
-        initial=initial,
-        disable=not enabled,
-        unit="step",
-        dynamic_ncols=True,
-        # The average rate: the bar moves fast while an episode is collected and waits for its
-        # updates, and a moving average of those bursts would promise too early an end.
-        smoothing=0.0,
-    )
-
-
-def _postfix(row: dict[str, Any], last_eval: dict[str, float]) -> dict[str, Any]:
-    out: dict[str, Any] = {"sps": row.get("steps_per_s"), "proxy": row.get("proxy_return")}
-    if "eval_score_norm" in last_eval:
-        out["eval"] = last_eval["eval_score_norm"]
-    elif "eval_score" in last_eval:
-        out["eval"] = last_eval["eval_score"]
-    return out
