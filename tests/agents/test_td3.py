@@ -12,7 +12,7 @@ import pytest
 from agent_helpers import ACT_DIM, MAX_ACTION, OBS_DIM, TINY, random_buffer
 
 from ilfo.agents import TD3Config, critic_loss, ddpg_config, make_td3, pal_loss, policy_of
-from ilfo.agents.td3 import augment_time, redraw_next_time
+from ilfo.agents.critic_targets import augment_time, redraw_next_time
 
 
 def tree_allclose(a, b, **kw) -> bool:

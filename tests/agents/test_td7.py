@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from agent_helpers import ACT_DIM, MAX_ACTION, OBS_DIM, random_buffer
 
-from ilfo.agents.td3 import pal_loss
+from ilfo.agents.critic_targets import pal_loss
 from ilfo.agents.td7 import (
     Encoder,
     TD7Config,

@@ -7,17 +7,9 @@ they read transitions from a ``ilfo.replay.ReplayData``.
 
 from ilfo.agents._common import Policy, policy_of
 from ilfo.agents.base import AgentFunctions
+from ilfo.agents.critic_targets import augment_time, critic_loss, pal_loss
 from ilfo.agents.sac import SAC, SACConfig, SACState, make_sac
-from ilfo.agents.td3 import (
-    TD3,
-    TD3Config,
-    TD3State,
-    augment_time,
-    critic_loss,
-    ddpg_config,
-    make_td3,
-    pal_loss,
-)
+from ilfo.agents.td3 import TD3, TD3Config, TD3State, ddpg_config, make_td3
 from ilfo.networks import (
     MLP,
     Critic,

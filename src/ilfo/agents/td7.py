@@ -13,16 +13,16 @@ What TD7 adds to TD3, each a piece of ``update_step``:
   ``target_update_every`` updates (no Polyak averaging).
 - **Value clipping**: TD targets' bootstrapped values clipped to the range of the targets seen
   during the previous target period (``clip_target``).
-- **LAP**, as its uniform-sampling equivalent: the PAL loss (``ilfo.agents.td3.pal_loss``, the
-  same authors' proof that PAL with uniform sampling has LAP's expected gradient), so the
-  replay buffer stays uniform.
+- **LAP**, as its uniform-sampling equivalent: the PAL loss
+  (``ilfo.agents.critic_targets.pal_loss``, the same authors' proof that PAL with uniform
+  sampling has LAP's expected gradient), so the replay buffer stays uniform.
 
 Not built: TD7's policy checkpoints (evaluating with the best recent policy), which need the
 loop to defer updates across episodes; the actor acts as trained. The authors' code
 (sfujim/TD7) was read for the architecture and schedules; this is ilfo's own JAX.
 
 Time augmentation (ilfo's fixed-horizon protocol) applies to the critic's samples as in TD3
-(``ilfo.agents.td3.augment_time``); the encoder and the actor use the recorded times.
+(``ilfo.agents.critic_targets.augment_time``); the encoder and the actor use the recorded times.
 
 Usage::
 
@@ -51,7 +51,8 @@ from ilfo.agents._common import (
     make_normalizer_setter,
     make_optimizer,
 )
-from ilfo.agents.td3 import TimeAugmentationScheme, augment_time, delayed_updates, pal_loss
+from ilfo.agents.critic_targets import TimeAugmentationScheme, augment_time, pal_loss
+from ilfo.agents.td3 import delayed_updates
 from ilfo.networks import dense, ensemble
 from ilfo.ranges import (
     batch,
