@@ -19,8 +19,8 @@ from ilfo.experiments.report import (
     collect_runs,
     imitates_shipped_demos,
     read_run,
-    write_report,
 )
+from ilfo.experiments.report_tables import write_report
 from ilfo.paper import paper_ablation, paper_cells, paper_score
 
 

@@ -480,7 +480,8 @@ def _add_report_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _run_report(args: argparse.Namespace) -> int:
-    from ilfo.experiments.report import build_report, collect_runs, write_report
+    from ilfo.experiments.report import build_report, collect_runs
+    from ilfo.experiments.report_tables import write_report
 
     if args.resamples < 100:
         raise ValueError(f"--resamples must be >= 100, got {args.resamples}")

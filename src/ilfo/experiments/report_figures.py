@@ -1,5 +1,5 @@
 """A report's figures: learning curves per task and performance profiles per demo count
-(``report.write_report`` writes them), and ``finish_figure``, which every figure of ``ilfo
+(``report_tables.write_report`` writes them), and ``finish_figure``, which every figure of ``ilfo
 report`` and ``ilfo reproduce`` ends with.
 
 A performance profile compares algorithms on the same tasks: it is drawn over the tasks that

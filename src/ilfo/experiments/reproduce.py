@@ -379,7 +379,8 @@ def reproduce(
     and write the report to ``root/report``; returns the plan and the report's files.
     ``log`` gets a line as each run's final rollouts are measured (minutes each)."""
     from ilfo.experiments.backends import run_sweeps
-    from ilfo.experiments.report import build_report, collect_runs, write_report
+    from ilfo.experiments.report import build_report, collect_runs
+    from ilfo.experiments.report_tables import write_report
     from ilfo.experiments.sweep import create_sweep
 
     the_plan = plan(name, budget)
