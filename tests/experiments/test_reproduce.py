@@ -220,7 +220,7 @@ def test_measures_are_cached_per_trained_step_and_skip_unfinished_runs(tmp_path)
     run's newest checkpoint is not its final policy, so it is left out, and said so."""
     from types import SimpleNamespace
 
-    from ilfo.experiments.reproduce import _cached, write_distances
+    from ilfo.experiments.measures import cached_measure, write_distances
 
     calls = []
 
@@ -230,18 +230,19 @@ def test_measures_are_cached_per_trained_step_and_skip_unfinished_runs(tmp_path)
 
     run = SimpleNamespace(run_dir=tmp_path, trained_step=1000)
     lines = []
-    assert _cached(run, "d.json", 10, compute, lines.append) == {"s": 1.0}
+    assert cached_measure(run, "d.json", 10, compute, lines.append) == {"s": 1.0}
     # Minutes of rollouts and solves are announced, and timed; a kept value is not.
     assert len(lines) == 2 and "measuring d, 10 final rollouts" in lines[0]
     assert lines[1].startswith(f"{tmp_path.name}: d measured in ")
-    assert _cached(run, "d.json", 10, compute, lines.append) == {"s": 1.0} and len(calls) == 1
+    assert cached_measure(run, "d.json", 10, compute, lines.append) == {"s": 1.0}
+    assert len(calls) == 1
     assert len(lines) == 2
-    assert _cached(run, "d.json", 5, compute) == {"s": 2.0}  # other episodes
+    assert cached_measure(run, "d.json", 5, compute) == {"s": 2.0}  # other episodes
     run.trained_step = 2000
-    assert _cached(run, "d.json", 5, compute) == {"s": 3.0}  # trained on since
+    assert cached_measure(run, "d.json", 5, compute) == {"s": 3.0}  # trained on since
     for damaged in ("", "[1, 2]", '{"key": {"trained_step": 2000, "episodes": 5}}'):
         (tmp_path / "d.json").write_text(damaged)  # a power loss, a hand edit: measured again
-        assert _cached(run, "d.json", 5, compute) == {"s": float(len(calls))}
+        assert cached_measure(run, "d.json", 5, compute) == {"s": float(len(calls))}
     assert len(calls) == 6
     unfinished = SimpleNamespace(run_dir=tmp_path / "Hopper-v5__oops-td3__0", finished=False)
     (out := tmp_path / "out").mkdir()
@@ -263,7 +264,7 @@ def _measure_stopped_at(pair, tmp_path, monkeypatch, rollouts, experts):
     from types import SimpleNamespace
 
     from ilfo.experiments import distances
-    from ilfo.experiments.reproduce import _measure_pairs
+    from ilfo.experiments.measures import measure_pairs
 
     shown = {"rollouts": rollouts}
     monkeypatch.setattr(distances, "final_rollouts", lambda *a, **k: (shown["rollouts"], experts))
@@ -277,14 +278,14 @@ def _measure_stopped_at(pair, tmp_path, monkeypatch, rollouts, experts):
 
     run = SimpleNamespace(run_dir=tmp_path, trained_step=1000)
     with pytest.raises(KeyboardInterrupt):
-        _measure_pairs(run, "m.json", 2, measure)
+        measure_pairs(run, "m.json", 2, measure)
     return run, measure, calls, shown
 
 
 def test_an_interrupted_measurement_continues_from_its_last_pair(tmp_path, monkeypatch):
     """The solver figure's pairs take about a minute each: a measurement stopped part-way
     keeps its pairs and, run again, measures only the others, to the uninterrupted mean."""
-    from ilfo.experiments.reproduce import _measure_pairs
+    from ilfo.experiments.measures import measure_pairs
 
     trajectories = _trajectories(5, seed=0)
     rollouts, experts = trajectories[:3], trajectories[3:]
@@ -296,7 +297,7 @@ def test_an_interrupted_measurement_continues_from_its_last_pair(tmp_path, monke
     assert partial_measure_file("m.json") == ".m.partial.json"
     assert ".solvers.partial.json" in SNAPSHOT_FILES
     lines = []
-    values = _measure_pairs(run, "m.json", 2, measure, lines.append)
+    values = measure_pairs(run, "m.json", 2, measure, lines.append)
     assert len(calls) == 4 + 3  # the fourth pair again, then the last two; not the first three
     expected = np.mean([measure(r, e)["d"] for r in rollouts for e in experts])
     assert values == {"d": pytest.approx(expected, rel=1e-12)}
@@ -307,12 +308,12 @@ def test_an_interrupted_measurement_continues_from_its_last_pair(tmp_path, monke
         json.dumps({"key": {"trained_step": 500, "episodes": 2}, "pairs": {"0,0": {"d": 9.0}}})
     )
     run.trained_step, before = 2000, len(calls)
-    assert _measure_pairs(run, "m.json", 2, measure)["d"] == pytest.approx(expected, rel=1e-12)
+    assert measure_pairs(run, "m.json", 2, measure)["d"] == pytest.approx(expected, rel=1e-12)
     assert len(calls) - before == 6
     # So are pairs in a damaged file.
     (tmp_path / ".m.partial.json").write_text('{"key": {"trained_st')
     run.trained_step, before = 3000, len(calls)
-    assert _measure_pairs(run, "m.json", 2, measure)["d"] == pytest.approx(expected, rel=1e-12)
+    assert measure_pairs(run, "m.json", 2, measure)["d"] == pytest.approx(expected, rel=1e-12)
     assert len(calls) - before == 6
     # Stopped after its last pair, before the finished measure is written: no pair is lost.
     from ilfo import files
@@ -327,9 +328,9 @@ def test_an_interrupted_measurement_continues_from_its_last_pair(tmp_path, monke
     monkeypatch.setattr(files, "write_json_atomic", stop_at_the_finished_measure)
     run.trained_step, before = 4000, len(calls)
     with pytest.raises(KeyboardInterrupt):
-        _measure_pairs(run, "m.json", 2, measure)
+        measure_pairs(run, "m.json", 2, measure)
     monkeypatch.setattr(files, "write_json_atomic", write)
-    assert _measure_pairs(run, "m.json", 2, measure)["d"] == pytest.approx(expected, rel=1e-12)
+    assert measure_pairs(run, "m.json", 2, measure)["d"] == pytest.approx(expected, rel=1e-12)
     assert len(calls) - before == 6 and not (tmp_path / ".m.partial.json").exists()
 
 
@@ -338,7 +339,7 @@ def test_pairs_of_other_rollouts_of_the_same_policy_are_measured_again(tmp_path,
     (the last bits of its floats): the kept pairs are of other trajectories, so a mean mixing
     them would mix two measurements."""
     from ilfo.experiments import distances
-    from ilfo.experiments.reproduce import _measure_pairs
+    from ilfo.experiments.measures import measure_pairs
 
     trajectories = _trajectories(4, seed=1)
     rollouts, experts = trajectories[:2], trajectories[2:]
@@ -350,7 +351,7 @@ def test_pairs_of_other_rollouts_of_the_same_policy_are_measured_again(tmp_path,
         rollouts
     )
     lines, before = [], len(calls)
-    _measure_pairs(run, "m.json", 2, measure, lines.append)
+    measure_pairs(run, "m.json", 2, measure, lines.append)
     assert len(calls) - before == 4  # every pair again, not the two kept
     assert "2 pairs kept from before are of another final policy or other rollouts" in lines[1]
 
