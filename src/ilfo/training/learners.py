@@ -24,8 +24,9 @@ import jax
 import numpy as np
 
 from ilfo.agents.base import OnPolicyBatch
-from ilfo.algos import REWARD_PARTS, Recipe, RewardPart
-from ilfo.composition.learned import LearnedRewardAgent
+from ilfo.algos import REWARD_PARTS, LearnedRewardPart, RewardPart
+from ilfo.composition.learned import RolloutPlan
+from ilfo.training.config import TrainConfig
 from ilfo.training.rollout import rollout_policy
 
 if TYPE_CHECKING:  # for annotations only: the trainer imports this module
@@ -86,8 +87,12 @@ class LearnedReward(OffPolicy):
     """A replay-buffer agent composed with a reward learned in its update
     (``composition.learned``, OPOLO)."""
 
-    def __init__(self, functions: LearnedRewardAgent) -> None:
+    def __init__(self, functions: Any, rollouts: RolloutPlan | None) -> None:
         self.functions = functions
+        """The composed agent's functions (``LearnedRewardAgent``, OPOLO's): ``rewards``, and
+        ``learn_from_rollouts`` where the reward learns from rollouts."""
+        self.rollouts = rollouts
+        """Where the reward learns from fresh episodes of the policy (f-IRL): when, how many."""
 
     def episode_rewards(self, trainer: Trainer, observations: np.ndarray) -> np.ndarray:
         # The update rewards its batches with the reward's parameters of the time; these
@@ -98,7 +103,7 @@ class LearnedReward(OffPolicy):
 
     def learn(self, trainer: Trainer, num_steps: int, updating: bool) -> dict[str, float]:
         metrics = super().learn(trainer, num_steps, updating)
-        plan = self.functions.rollouts
+        plan = self.rollouts
         if (
             plan is not None
             and trainer.step // plan.every > (trainer.step - num_steps) // plan.every
@@ -210,13 +215,16 @@ def policy_rollouts(trainer: Trainer, episodes: int, iteration: int) -> np.ndarr
     return np.stack(trajectories)
 
 
-def learner_of(recipe: Recipe, functions: Any) -> Learner:
-    """The strategy of ``recipe``'s kind of learner (``Recipe.learner``), for the agent
+def learner_of(config: TrainConfig, functions: Any) -> Learner:
+    """The strategy of ``config``'s algo's kind of learner (``Recipe.learner``), for the agent
     ``functions`` that ``build.make_agent`` made for it."""
+    recipe = config.recipe
+    part = None if recipe.reward is None else REWARD_PARTS[recipe.reward]
     if recipe.learner == "on_policy":
-        part = None if recipe.reward is None else REWARD_PARTS[recipe.reward]
         learns_per_batch = isinstance(part, RewardPart) and part.learns_per_batch
         return OnPolicyBatches(functions.batch_steps, learns_per_batch)
     if recipe.learner == "learned_reward":
-        return LearnedReward(functions)
+        assert isinstance(part, LearnedRewardPart)  # what makes a recipe's learner this kind
+        plan = None if part.rollouts is None else part.rollouts(config.part_config(recipe.reward))
+        return LearnedReward(functions, plan)
     return OffPolicy()

@@ -121,7 +121,7 @@ class Trainer:
         self.rewarder = make_reward(config, self.demos)
         self.unconverged_rewards = 0  # episodes whose coupling missed its tolerance
         self.agent = make_agent(config, env, self.demos)
-        self.learner: Learner = learner_of(config.recipe, self.agent.functions)
+        self.learner: Learner = learner_of(config, self.agent.functions)
         """What this kind of learner does differently in the loop (``training.learners``)."""
         self.state = self.agent.functions.init(config.seed)
         self.buffer = self.new_buffer()
