@@ -17,6 +17,7 @@ from ilfo.agents import SACConfig, TD3Config
 from ilfo.agents.td7 import TD7Config
 from ilfo.algos import ALGOS
 from ilfo.cli import main
+from ilfo.labelling import LabelConfig
 from ilfo.paths import bundled_demos
 from ilfo.ranges import INT32_MAX, SettingError, declaration
 from ilfo.rewards import OOPSConfig
@@ -250,7 +251,9 @@ def _item_in_range(item, declared):
     return high is None or not (item > high or (declared and declared.high_open and item == high))
 
 
-@pytest.mark.parametrize("cls", [TD3Config, TD7Config, SACConfig, OOPSConfig, TrainConfig])
+@pytest.mark.parametrize(
+    "cls", [TD3Config, TD7Config, SACConfig, OOPSConfig, TrainConfig, LabelConfig]
+)
 def test_any_value_of_a_numeric_field_is_held_in_range_or_refused_with_a_value_error(cls):
     names = _numeric_fields(cls)
     assert len(names) >= 4
