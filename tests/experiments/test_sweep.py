@@ -139,7 +139,7 @@ def test_a_finished_runs_config_json_as_the_spec_config_repeats_it_on_the_sweeps
         ({"config": {"seed": 3}}, "its axis"),
         ({"config": {"out": "x"}}, "sweep directory"),
         ({"seed": (0, 0)}, "twice"),
-        ({"algo": ()}, "at least one"),
+        ({"algo": ()}, "algo must hold at least 1 value"),
         ({"config": {"sac": {"tau": 0.01}}}, "no algo of the sweep uses"),
         ({"config": {"oops": {"nope": 1}}}, "no setting"),
         ({"config": {"steps": 0}}, "steps must be >= 1"),
@@ -147,12 +147,40 @@ def test_a_finished_runs_config_json_as_the_spec_config_repeats_it_on_the_sweeps
         ({"retries": -1}, "retries"),
         ({"config": {"contact_forces": False}}, "none of its envs observe"),
         ({"env": ("Hopper-v5", "Hoper-v5")}, "unknown environment 'Hoper-v5'"),
-        ({"seed": (-3,)}, "seed must be >= 0"),
+        ({"seed": (-3,)}, "seed must hold numbers that are >= 0"),
     ],
 )
 def test_bad_specs_are_refused_clearly(kwargs, message):
     with pytest.raises(ValueError, match=message):
         expand(SweepSpec(**kwargs))
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"num_demos": 2.5}, "num_demos must be a list of integers, got 2.5 (float)"),
+        ({"num_demos": (0, 1)}, "num_demos must hold numbers that are >= 1, got (0, 1)"),
+        ({"seed": (0, 2**32)}, "seed must hold numbers that are >= 0 and at most 4,294,967,295"),
+        ({"algo": ("td3", 3)}, "algo must be a list of strings, got ('td3', 3)"),
+        ({"retries": 2**40}, "retries must be at most 2,147,483,647"),
+        ({"retries": 1.5}, "retries must be an integer, got 1.5 (float)"),
+    ],
+)
+def test_a_bad_axis_or_retries_is_refused_by_the_spec_itself(kwargs, message):
+    """Declared ranges (ilfo.ranges): refused when the spec is made, before any run's config."""
+    with pytest.raises(ValueError) as refused:
+        SweepSpec(**kwargs)
+    assert message in str(refused.value) and "\n" not in str(refused.value)
+    with pytest.raises(ValueError, match=r"^spec\.json: "):  # a spec file's error names the file
+        SweepSpec.from_dict(kwargs, "spec.json")
+
+
+def test_a_spec_holds_its_axes_as_tuples_of_ints():
+    import numpy as np
+
+    spec = SweepSpec(num_demos=[np.int64(2)], seed=[np.int32(4), 5], retries=np.int64(1))
+    assert spec.num_demos == (2,) and spec.seed == (4, 5) and spec.retries == 1
+    assert {type(v) for v in (*spec.num_demos, *spec.seed, spec.retries)} == {int}
 
 
 def test_parse_seeds():
