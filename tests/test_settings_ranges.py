@@ -9,6 +9,7 @@ import math
 import pickle
 import typing
 
+import jax.numpy as jnp
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -186,6 +187,22 @@ def test_accepted_values_are_held_as_their_declared_types():
     assert type(config.tau) is float and type(config.batch_size) is int
     assert TD3Config(critic_grad_clip=None).critic_grad_clip is None
     assert TrainConfig(healthy_angle_range=[-0.1, 0.1]).healthy_angle_range == (-0.1, 0.1)
+
+
+def test_more_updates_than_the_agents_int32_counter_holds_are_refused_up_front():
+    """A run's updates, steps * updates_per_step at most, are counted in the agents' int32
+    ``state.step``: one more than it holds would wrap to negative mid-run."""
+    from ilfo.agents import make_td3
+
+    step = make_td3(TD3Config.fast(), 3, 1).init(0).step
+    assert jnp.iinfo(step.dtype).max == INT32_MAX
+    assert int(step + INT32_MAX + 1) < 0  # why: the count wraps, silently
+    TrainConfig(steps=2**16, updates_per_step=2**15 - 1)  # 2**31 - 2**16 updates: accepted
+    with pytest.raises(ValueError, match="steps \\* updates_per_step must be at most"):
+        TrainConfig(steps=2**16, updates_per_step=2**15)
+    # (Not through `ilfo train`: without the check, that test would train for days.)
+    with pytest.raises(ValueError, match="= 2,147,483,648 \\(--steps, --updates-per-step\\)"):
+        config_from_dict({"steps": 2**30, "updates_per_step": 2}, "config.json")
 
 
 def test_a_task_reward_record_with_demos_reads_back_without_them():
