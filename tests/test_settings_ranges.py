@@ -157,6 +157,31 @@ def test_the_memory_estimate_of_the_defaults_is_small_and_named_by_setting():
     assert size_text(1536) == "1.5 KiB" and size_text(12 * 2**40) == "12.0 TiB"
 
 
+def test_an_ot_rewards_matrices_count_in_the_estimate(tmp_path, monkeypatch):
+    """OOPS solves an episode of the horizon's atoms against a demo's: float64 matrices of
+    horizon x demo atoms (Sinkhorn: the cost, the kernel, Newton's plan and its scaled copy)."""
+    from ilfo.training import Trainer, resources
+
+    needs = resources.memory_needs(TrainConfig(), 11, 3, horizon=10**6, demo_lengths=[1000])
+    ot = [n for n in needs if n.what.startswith("OOPS's sinkhorn")]
+    assert len(ot) == 1 and ot[0].bytes == (4 * 10**9 + 1000**2) * 8
+    assert "horizon 1,000,000 x 1,000 demo atoms x 4 matrices" in ot[0].what
+    pooled = TrainConfig(num_demos=3, oops={"demo_selection": "pooled"})
+    assert "x 3,000 demo atoms" in resources.memory_needs(pooled, 11, 3, 1000, [1000] * 3)[-1].what
+    # A task-reward run solves none; an imitation run without an OT reward logs an OT distance.
+    assert not any(
+        "OT" in n.what for n in resources.memory_needs(TrainConfig(algo="td3"), 11, 3, 1000)
+    )
+    gaifo = resources.memory_needs(TrainConfig(algo="gaifo-td3"), 11, 3, 1000, [1000])
+    assert gaifo[-1].what.startswith("the evaluations' OT distance (Sinkhorn)")
+    # A run whose OT would not fit is refused before anything large is allocated.
+    monkeypatch.setattr(resources, "machine_memory", lambda: 16 * 2**30)
+    config = TrainConfig(horizon=10**6, preset="fast", demos=DEMOS, replay_capacity=1000)
+    with pytest.raises(ValueError, match=r"this machine has 16\.0 GiB") as refused:
+        Trainer(config, tmp_path / "run", progress=False)
+    assert "OOPS's sinkhorn: horizon 1,000,000 x 1,000 demo atoms" in str(refused.value)
+
+
 def test_an_env_without_a_box_of_actions_is_a_clear_error():
     import gymnasium as gym
 
