@@ -8,6 +8,7 @@ import json
 import math
 import pickle
 import typing
+from pathlib import Path
 
 import jax.numpy as jnp
 import pytest
@@ -236,6 +237,44 @@ def test_a_task_reward_record_with_demos_reads_back_without_them():
     assert config_from_dict(record, "config.json").demos is None
     with pytest.raises(ValueError, match="do not apply to algo 'td3'"):
         TrainConfig(**record)
+
+
+RESULTS = Path(__file__).parents[1] / "docs" / "results"
+KEPT_CONFIGS = sorted(RESULTS.glob("runs/*/config.json")) + sorted(
+    RESULTS.glob("controls/*/config.json")
+)
+
+
+@pytest.mark.parametrize(
+    "path", KEPT_CONFIGS, ids=lambda p: f"{p.parent.parent.name}/{p.parent.name}"
+)
+def test_a_kept_runs_config_json_is_the_config_of_a_new_run(path):
+    """``ilfo train --config RUN/config.json``'s config (built as the flag builds it, not
+    trained): the run's settings as its record reads back, with the flags' changes."""
+    from ilfo.cli.train import config_from_args
+    from ilfo.training import read_settings
+
+    config = config_from_args(str(path), {"steps": 2000, "out": "x"}, {})
+    got = json.loads(json.dumps(dataclasses.asdict(config)))
+    for key, value in {**read_settings(path), "steps": 2000, "out": "x"}.items():
+        if isinstance(value, dict):  # a part: the fields it recorded (newer ones: defaults)
+            assert {k: got[key][k] for k in value} == value, key
+        else:
+            assert got[key] == value, key
+
+
+def test_a_task_reward_runs_config_json_with_demos_is_a_config_without_them(tmp_path, capsys):
+    """Records from before demos were refused for the task reward list them; as ``--config``
+    they apply where the algo imitates, while ``--demos`` with a task-reward algo is refused."""
+    from ilfo.cli.train import config_from_args
+
+    assert len(KEPT_CONFIGS) >= 20  # the runs and controls the test above reads
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps({**dataclasses.asdict(TrainConfig(algo="td3")), "demos": DEMOS}))
+    assert config_from_args(str(path), {"steps": 2000}, {}).demos is None
+    assert config_from_args(str(path), {"algo": "oops-td3"}, {}).demos == DEMOS
+    line = _refused(["--config", str(path), "--demos", DEMOS, *_guards()], capsys, tmp_path / "r")
+    assert "demos (--demos) do not apply to algo 'td3'" in line
 
 
 WILD = st.one_of(

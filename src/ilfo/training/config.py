@@ -363,11 +363,18 @@ def config_from_dict(raw: dict[str, Any], source: str | Path) -> TrainConfig:
     of the wrong type). A record without ``contact_forces`` predates the setting, when every
     run observed them: it reads back as True. A task-reward run's record with ``demos``
     predates their refusal, when they were ignored: it reads back without them."""
-    raw = {"contact_forces": True, **raw}
-    algo = raw.get("algo")
-    if isinstance(algo, str) and algo in ALGOS and not ALGOS[algo].imitation:
-        raw["demos"] = None
+    raw = without_task_reward_demos({"contact_forces": True, **raw}, raw.get("algo"))
     return _checked_config(raw, source)
+
+
+def without_task_reward_demos(settings: Mapping[str, Any], algo: Any) -> dict[str, Any]:
+    """``settings`` (a record's or a settings file's) without their ``demos`` where ``algo``
+    learns from the task reward: records from before demos were refused for it list them (they
+    were ignored), and a file's demos apply to the imitation algos only, as a sweep's base
+    config's do. Demos given for the run itself (``--demos``) are still refused."""
+    if isinstance(algo, str) and algo in ALGOS and not ALGOS[algo].imitation:
+        return {key: value for key, value in settings.items() if key != "demos"}
+    return dict(settings)
 
 
 def _checked_config(raw: Mapping[str, Any], source: str | Path) -> TrainConfig:
