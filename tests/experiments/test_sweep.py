@@ -290,9 +290,12 @@ def test_a_run_with_results_and_no_checkpoint_is_unresumable_not_trained_again(t
 
 
 def test_snapshot_keeps_checkpoints_without_buffers_and_continues_as_a_sweep(tmp_path):
-    sweep = create_sweep(tmp_path / "sweep", SweepSpec(seed=(0, 1, 2), config=TINY))
-    done, partial, unstarted = (r.name for r in sweep.runs)
+    sweep = create_sweep(tmp_path / "sweep", SweepSpec(seed=(0, 1, 2, 3), config=TINY))
+    done, partial, unstarted, gone = (r.name for r in sweep.runs)
     _finish(sweep, done)
+    _finish(sweep, gone)  # a finished run whose checkpoints were removed: unresumable
+    (sweep.run_dir(gone) / "metrics.csv").write_text("step,episode\n100,1\n200,2\n300,3\n")
+    shutil.rmtree(sweep.run_dir(gone) / "checkpoints")
     _finish(sweep, partial, step=200)
     (sweep.run_dir(partial) / FINAL_POLICY_FILE).unlink()  # interrupted at step 200
     for name in (done, partial):
@@ -310,10 +313,13 @@ def test_snapshot_keeps_checkpoints_without_buffers_and_continues_as_a_sweep(tmp
         done: "done",
         partial: "checkpoint at step 200",
         unstarted: "left out (no checkpoint)",
+        gone: "unresumable (results, no checkpoint)",
     }
     copy = open_sweep(tmp_path / "copy")
     assert copy.runs == sweep.runs
-    assert [s.state for s in copy.statuses()] == ["done", "pending", "pending"]
+    assert [s.state for s in copy.statuses()] == ["done", "pending", "pending", "unresumable"]
+    for name in ("metrics.csv", FINAL_POLICY_FILE):  # its results, not started again there
+        assert (copy.run_dir(gone) / name).read_bytes() == (sweep.run_dir(gone) / name).read_bytes()
     assert copy.statuses()[1].step == 200
     assert read_attempts(copy, done) == read_attempts(sweep, done)
     assert copy.log_file(done).read_text() == "log"

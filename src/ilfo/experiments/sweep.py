@@ -400,13 +400,14 @@ def snapshot_sweep(root: str | Path, out: str | Path) -> dict[str, str]:
     buffer refilled by ``start_steps`` steps of the current policy, so not the exact
     continuation; on-policy runs exactly), and runs without a checkpoint start afresh.
 
-    Returns what became of each run: ``done``, ``checkpoint at step N`` or ``left out (no
-    checkpoint)``. Raises FileExistsError where ``out`` exists, and ValueError where it lies
-    inside the sweep or while any run of the sweep is running (stop the sweep first: Ctrl-C
-    checkpoints every run)."""
+    Returns what became of each run: ``done``, ``checkpoint at step N``, ``unresumable`` (its
+    results copied without a checkpoint, so that the copy reads as the sweep does and never
+    trains it again) or ``left out (no checkpoint)``. Raises FileExistsError where ``out``
+    exists, and ValueError where it lies inside the sweep or while any run of the sweep is
+    running (stop the sweep first: Ctrl-C checkpoints every run)."""
     import shutil
 
-    from ilfo.training.run_dir import checkpoint_steps, snapshot_run
+    from ilfo.training.run_dir import checkpoint_steps, copy_results, snapshot_run
 
     sweep, out = open_sweep(root), Path(out)
     check_new_copy_dir(sweep.root, out)
@@ -431,6 +432,11 @@ def snapshot_sweep(root: str | Path, out: str | Path) -> dict[str, str]:
         kept = {}
         for status in statuses:
             checkpoints = checkpoint_steps(sweep.run_dir(status.name))
+            if status.state == "unresumable":
+                (tmp / RUNS_DIR / status.name).mkdir()
+                copy_results(sweep.run_dir(status.name), tmp / RUNS_DIR / status.name)
+                kept[status.name] = "unresumable (results, no checkpoint)"
+                continue
             if not checkpoints:
                 kept[status.name] = "left out (no checkpoint)"
                 continue

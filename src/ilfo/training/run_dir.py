@@ -433,6 +433,14 @@ SNAPSHOT_FILES = (
 """What ``snapshot_run`` copies besides the newest checkpoint (each where it exists)."""
 
 
+def copy_results(run_dir: Path, out: Path) -> None:
+    """Copy the ``SNAPSHOT_FILES`` run ``run_dir`` holds (its config, demos record, metrics,
+    policies) into directory ``out``, which must exist."""
+    for name in SNAPSHOT_FILES:
+        if (run_dir / name).is_file():
+            shutil.copy2(run_dir / name, out / name)
+
+
 def snapshot_run(run_dir: str | Path, out: str | Path) -> Path:
     """A copy of a run small enough to keep in git or move between machines: its config,
     metrics, policies and newest complete checkpoint without the replay buffer (the agent's and
@@ -464,9 +472,7 @@ def snapshot_run(run_dir: str | Path, out: str | Path) -> Path:
         tmp = out.with_name(f".{out.name}.tmp")
         shutil.rmtree(tmp, ignore_errors=True)
         (tmp / CHECKPOINTS_DIR).mkdir(parents=True)
-        for name in SNAPSHOT_FILES:
-            if (run_dir / name).is_file():
-                shutil.copy2(run_dir / name, tmp / name)
+        copy_results(run_dir, tmp)
         target = tmp / CHECKPOINTS_DIR / checkpoint.name
         if keeps_buffer:
             shutil.copytree(checkpoint, target)
