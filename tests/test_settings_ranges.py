@@ -264,17 +264,23 @@ def test_a_kept_runs_config_json_is_the_config_of_a_new_run(path):
 
 
 def test_a_task_reward_runs_config_json_with_demos_is_a_config_without_them(tmp_path, capsys):
-    """Records from before demos were refused for the task reward list them; as ``--config``
-    they apply where the algo imitates, while ``--demos`` with a task-reward algo is refused."""
+    """Records from before demos were refused for the task reward list them: as ``--config``
+    they read back without them, while ``--demos``, or a settings file that is not a run's
+    record, with a task-reward algo is refused."""
     from ilfo.cli.train import config_from_args
 
     assert len(KEPT_CONFIGS) >= 20  # the runs and controls the test above reads
-    path = tmp_path / "config.json"
-    path.write_text(json.dumps({**dataclasses.asdict(TrainConfig(algo="td3")), "demos": DEMOS}))
-    assert config_from_args(str(path), {"steps": 2000}, {}).demos is None
-    assert config_from_args(str(path), {"algo": "oops-td3"}, {}).demos == DEMOS
-    line = _refused(["--config", str(path), "--demos", DEMOS, *_guards()], capsys, tmp_path / "r")
-    assert "demos (--demos) do not apply to algo 'td3'" in line
+    run = tmp_path / "old-td3-run"
+    run.mkdir()
+    (run / "metrics.csv").write_text("step,episode\n1000,1\n")  # a run's record
+    record = json.dumps({**dataclasses.asdict(TrainConfig(algo="td3")), "demos": DEMOS})
+    (run / "config.json").write_text(record)
+    assert config_from_args(str(run / "config.json"), {"steps": 2000}, {}).demos is None
+    flags = ["--config", str(run / "config.json"), "--demos", DEMOS, *_guards()]
+    assert "demos (--demos) do not apply to algo 'td3'" in _refused(flags, capsys, tmp_path / "r")
+    (tmp_path / "settings.json").write_text(record)
+    with pytest.raises(ValueError, match="do not apply to algo 'td3'"):
+        config_from_args(str(tmp_path / "settings.json"), {}, {})
 
 
 WILD = st.one_of(

@@ -90,10 +90,8 @@ def settings_from_args(
     given (``overrides``: TrainConfig fields; ``groups``: single fields of a part, by name).
     A run's config.json records the contact forces its env and algo observed: where the flags
     change (or ``drop`` leaves out) the file's env or algo, that choice is left out too (the new
-    pair's default) unless a flag sets it; the file's demos are left out for a task-reward algo
-    (``without_task_reward_demos``)."""
+    pair's default) unless a flag sets it."""
     from ilfo.training import read_settings, settings_for_new_runs
-    from ilfo.training.config import without_task_reward_demos
 
     settings: dict[str, Any] = {}
     if config_file is not None:
@@ -103,7 +101,6 @@ def settings_from_args(
             k for k in ("env", "algo") if k in overrides and overrides[k] != settings.get(k)
         )
         settings = settings_for_new_runs(settings, (*drop, *changed))
-        settings = without_task_reward_demos(settings, overrides.get("algo", settings.get("algo")))
     settings.update(overrides)
     for name, given in groups.items():
         settings[name] = {**(settings.get(name) or {}), **given}

@@ -368,10 +368,9 @@ def config_from_dict(raw: dict[str, Any], source: str | Path) -> TrainConfig:
 
 
 def without_task_reward_demos(settings: Mapping[str, Any], algo: Any) -> dict[str, Any]:
-    """``settings`` (a record's or a settings file's) without their ``demos`` where ``algo``
-    learns from the task reward: records from before demos were refused for it list them (they
-    were ignored), and a file's demos apply to the imitation algos only, as a sweep's base
-    config's do. Demos given for the run itself (``--demos``) are still refused."""
+    """A run's record (config.json) without its ``demos`` where ``algo`` learns from the task
+    reward: records from before demos were refused for it list them (they were ignored). Demos
+    given for a run (``--demos``, a settings file of one's own) are still refused."""
     if isinstance(algo, str) and algo in ALGOS and not ALGOS[algo].imitation:
         return {key: value for key, value in settings.items() if key != "demos"}
     return dict(settings)

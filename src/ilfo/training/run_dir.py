@@ -299,11 +299,16 @@ def read_settings(path: str | Path) -> dict[str, Any]:
     """A settings file (``files.read_settings_file``), read as the run record it is where it is
     a run's config.json (one beside its run's metrics.csv): then, as ``read_run_config``
     reads it, with the episodes that run trained on, so that ``--config RUN/config.json``
-    repeats the run even where its algo's default has changed since."""
+    repeats the run even where its algo's default has changed since (and without the demos a
+    task-reward run's old record lists: ``config.without_task_reward_demos``)."""
     path = Path(path)
     settings = read_settings_file(path)
     if path.name == CONFIG_FILE and (path.parent / METRICS_FILE).is_file():
-        return _with_episodes_as_run(settings)
+        from ilfo.training.config import without_task_reward_demos
+
+        # A task-reward run's record from before demos were refused for it may list them.
+        record = _with_episodes_as_run(settings)
+        return without_task_reward_demos(record, record.get("algo"))
     return settings
 
 
