@@ -288,3 +288,20 @@ def test_missing_expert_is_a_clear_error(tmp_path, capsys):
         load_expert(tmp_path)
     assert main(["expert", "eval", "NoSuchEnv-v0"]) == 2
     assert "no expert" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("episodes", [0, 10_001, 10**9, 2.5])
+def test_expert_eval_episodes_are_bounded_as_a_runs_evaluation(episodes, capsys, monkeypatch):
+    """Checked before the expert is loaded (a billion episodes' seeds alone are GBs)."""
+    import ilfo.experts
+
+    def unreachable(path):
+        raise AssertionError("the expert was loaded before its episodes were checked")
+
+    monkeypatch.setattr(ilfo.experts, "load_expert", unreachable)
+    with pytest.raises(ValueError, match="episodes must be"):
+        evaluate_expert("Hopper-v5", episodes)
+    if isinstance(episodes, int):
+        assert main(["expert", "eval", "Hopper-v5", "--episodes", str(episodes)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and "--episodes must be from 1 to 10,000" in err, err

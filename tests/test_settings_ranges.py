@@ -8,7 +8,9 @@ import json
 import math
 import pickle
 import typing
+from pathlib import Path
 
+import jax.numpy as jnp
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -17,6 +19,7 @@ from ilfo.agents import SACConfig, TD3Config
 from ilfo.agents.td7 import TD7Config
 from ilfo.algos import ALGOS
 from ilfo.cli import main
+from ilfo.labelling import LabelConfig
 from ilfo.paths import bundled_demos
 from ilfo.ranges import INT32_MAX, SettingError, declaration
 from ilfo.rewards import OOPSConfig
@@ -155,6 +158,31 @@ def test_the_memory_estimate_of_the_defaults_is_small_and_named_by_setting():
     assert size_text(1536) == "1.5 KiB" and size_text(12 * 2**40) == "12.0 TiB"
 
 
+def test_an_ot_rewards_matrices_count_in_the_estimate(tmp_path, monkeypatch):
+    """OOPS solves an episode of the horizon's atoms against a demo's: float64 matrices of
+    horizon x demo atoms (Sinkhorn: the cost, the kernel, Newton's plan and its scaled copy)."""
+    from ilfo.training import Trainer, resources
+
+    needs = resources.memory_needs(TrainConfig(), 11, 3, horizon=10**6, demo_lengths=[1000])
+    ot = [n for n in needs if n.what.startswith("OOPS's sinkhorn")]
+    assert len(ot) == 1 and ot[0].bytes == (4 * 10**9 + 1000**2) * 8
+    assert "horizon 1,000,000 x 1,000 demo atoms x 4 matrices" in ot[0].what
+    pooled = TrainConfig(num_demos=3, oops={"demo_selection": "pooled"})
+    assert "x 3,000 demo atoms" in resources.memory_needs(pooled, 11, 3, 1000, [1000] * 3)[-1].what
+    # A task-reward run solves none; an imitation run without an OT reward logs an OT distance.
+    assert not any(
+        "OT" in n.what for n in resources.memory_needs(TrainConfig(algo="td3"), 11, 3, 1000)
+    )
+    gaifo = resources.memory_needs(TrainConfig(algo="gaifo-td3"), 11, 3, 1000, [1000])
+    assert gaifo[-1].what.startswith("the evaluations' OT distance (Sinkhorn)")
+    # A run whose OT would not fit is refused before anything large is allocated.
+    monkeypatch.setattr(resources, "machine_memory", lambda: 16 * 2**30)
+    config = TrainConfig(horizon=10**6, preset="fast", demos=DEMOS, replay_capacity=1000)
+    with pytest.raises(ValueError, match=r"this machine has 16\.0 GiB") as refused:
+        Trainer(config, tmp_path / "run", progress=False)
+    assert "OOPS's sinkhorn: horizon 1,000,000 x 1,000 demo atoms" in str(refused.value)
+
+
 def test_an_env_without_a_box_of_actions_is_a_clear_error():
     import gymnasium as gym
 
@@ -187,12 +215,72 @@ def test_accepted_values_are_held_as_their_declared_types():
     assert TrainConfig(healthy_angle_range=[-0.1, 0.1]).healthy_angle_range == (-0.1, 0.1)
 
 
+def test_more_updates_than_the_agents_int32_counter_holds_are_refused_up_front():
+    """A run's updates, steps * updates_per_step at most, are counted in the agents' int32
+    ``state.step``: one more than it holds would wrap to negative mid-run."""
+    from ilfo.agents import make_td3
+
+    step = make_td3(TD3Config.fast(), 3, 1).init(0).step
+    assert jnp.iinfo(step.dtype).max == INT32_MAX
+    assert int(step + INT32_MAX + 1) < 0  # why: the count wraps, silently
+    TrainConfig(steps=2**16, updates_per_step=2**15 - 1)  # 2**31 - 2**16 updates: accepted
+    with pytest.raises(ValueError, match="steps \\* updates_per_step must be at most"):
+        TrainConfig(steps=2**16, updates_per_step=2**15)
+    # (Not through `ilfo train`: without the check, that test would train for days.)
+    with pytest.raises(ValueError, match="= 2,147,483,648 \\(--steps, --updates-per-step\\)"):
+        config_from_dict({"steps": 2**30, "updates_per_step": 2}, "config.json")
+
+
 def test_a_task_reward_record_with_demos_reads_back_without_them():
     """Records from before demos were refused for the task reward (they were ignored)."""
     record = {**dataclasses.asdict(TrainConfig(algo="td3")), "demos": DEMOS}
     assert config_from_dict(record, "config.json").demos is None
     with pytest.raises(ValueError, match="do not apply to algo 'td3'"):
         TrainConfig(**record)
+
+
+RESULTS = Path(__file__).parents[1] / "docs" / "results"
+KEPT_CONFIGS = sorted(RESULTS.glob("runs/*/config.json")) + sorted(
+    RESULTS.glob("controls/*/config.json")
+)
+
+
+@pytest.mark.parametrize(
+    "path", KEPT_CONFIGS, ids=lambda p: f"{p.parent.parent.name}/{p.parent.name}"
+)
+def test_a_kept_runs_config_json_is_the_config_of_a_new_run(path):
+    """``ilfo train --config RUN/config.json``'s config (built as the flag builds it, not
+    trained): the run's settings as its record reads back, with the flags' changes."""
+    from ilfo.cli.train import config_from_args
+    from ilfo.training import read_settings
+
+    config = config_from_args(str(path), {"steps": 2000, "out": "x"}, {})
+    got = json.loads(json.dumps(dataclasses.asdict(config)))
+    for key, value in {**read_settings(path), "steps": 2000, "out": "x"}.items():
+        if isinstance(value, dict):  # a part: the fields it recorded (newer ones: defaults)
+            assert {k: got[key][k] for k in value} == value, key
+        else:
+            assert got[key] == value, key
+
+
+def test_a_task_reward_runs_config_json_with_demos_is_a_config_without_them(tmp_path, capsys):
+    """Records from before demos were refused for the task reward list them: as ``--config``
+    they read back without them, while ``--demos``, or a settings file that is not a run's
+    record, with a task-reward algo is refused."""
+    from ilfo.cli.train import config_from_args
+
+    assert len(KEPT_CONFIGS) >= 20  # the runs and controls the test above reads
+    run = tmp_path / "old-td3-run"
+    run.mkdir()
+    (run / "metrics.csv").write_text("step,episode\n1000,1\n")  # a run's record
+    record = json.dumps({**dataclasses.asdict(TrainConfig(algo="td3")), "demos": DEMOS})
+    (run / "config.json").write_text(record)
+    assert config_from_args(str(run / "config.json"), {"steps": 2000}, {}).demos is None
+    flags = ["--config", str(run / "config.json"), "--demos", DEMOS, *_guards()]
+    assert "demos (--demos) do not apply to algo 'td3'" in _refused(flags, capsys, tmp_path / "r")
+    (tmp_path / "settings.json").write_text(record)
+    with pytest.raises(ValueError, match="do not apply to algo 'td3'"):
+        config_from_args(str(tmp_path / "settings.json"), {}, {})
 
 
 WILD = st.one_of(
@@ -250,7 +338,9 @@ def _item_in_range(item, declared):
     return high is None or not (item > high or (declared and declared.high_open and item == high))
 
 
-@pytest.mark.parametrize("cls", [TD3Config, TD7Config, SACConfig, OOPSConfig, TrainConfig])
+@pytest.mark.parametrize(
+    "cls", [TD3Config, TD7Config, SACConfig, OOPSConfig, TrainConfig, LabelConfig]
+)
 def test_any_value_of_a_numeric_field_is_held_in_range_or_refused_with_a_value_error(cls):
     names = _numeric_fields(cls)
     assert len(names) >= 4

@@ -43,6 +43,7 @@ from ilfo.training import (
     rollout_policy,
     score_policy,
 )
+from ilfo.training.config import check_eval_episodes
 
 POLICY_FILE, EXPERT_FILE, DEMOS_FILE, CARD_FILE = (
     "policy.msgpack",
@@ -403,7 +404,9 @@ def card_evaluation(directory: str | Path, episodes: int = CARD_EVAL_EPISODES) -
 def evaluate_expert(
     path: str | Path, episodes: int, first_seed: int = EVAL_FIRST_SEED
 ) -> dict[str, Any]:
-    """Mean and std of an expert's fixed-horizon score and standard return."""
+    """Mean and std of an expert's fixed-horizon score and standard return over ``episodes``,
+    from 1 to ``training.config.MAX_EVAL_EPISODES`` (as a run's evaluation)."""
+    check_eval_episodes(episodes, "--episodes")
     expert = load_expert(path)
     env = make_env(
         expert.config.env,

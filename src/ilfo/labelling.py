@@ -41,6 +41,7 @@ from typing import Any, Literal
 import numpy as np
 
 from ilfo.envs import CONTACT_FORCE_DIMS, FULL_OBSERVATION_DIMS, match_observation_width
+from ilfo.ranges import check_fields, count, positive
 from ilfo.rewards import OOPS, OOPSConfig
 from ilfo.threads import THREAD_VARIABLES
 from ilfo.training.config import imitation_drops_contact_forces
@@ -58,38 +59,26 @@ class LabelConfig:
     squashing: Squashing = "exponential"
     """``oops`` (OOPS's reward scale), ``linear`` (alpha * -c) or ``exponential``
     (alpha * exp(beta * -c), OTR's)."""
-    alpha: float = 5.0
+    alpha: float = positive(5.0)
     """Scale of the linear and exponential squashing (OTR: 5 for exponential, 10 for
-    linear)."""
-    beta: float = 5.0
+    linear); > 0, as ``beta``: <= 0 would reward the episodes far from the demos most."""
+    beta: float = positive(5.0)
     """Rate of the exponential squashing (OTR: 5)."""
-    top_k: int = 1
+    top_k: int = count(1)
     """Demos averaged: the k whose rewards of the episode sum highest (OTR's top-k)."""
-    episode_length: int | None = None
+    episode_length: int | None = count(None)
     """H: the linear and exponential squashings see each step's cost at the mass 1/H, as OTR
     (its ``episode_length``, 1000 on MuJoCo); None: the longest demo's transitions."""
 
     def __post_init__(self) -> None:
-        if self.squashing not in ("oops", "linear", "exponential"):
-            raise ValueError(
-                f"squashing must be oops, linear or exponential, got {self.squashing!r}"
-            )
+        # Types and ranges, from the fields' declarations (ilfo.ranges), named with the flags
+        # of ``ilfo label``.
+        check_fields(self, flags="")
         if self.oops.kernel != "linear":
             raise ValueError(
                 "the labeller turns costs into rewards by its squashing (squashing, alpha, beta),"
                 f" not by oops.kernel; leave oops.kernel linear, got {self.oops.kernel!r}"
             )
-        if isinstance(self.top_k, bool) or not isinstance(self.top_k, int) or self.top_k < 1:
-            raise ValueError(f"top_k must be an integer >= 1, got {self.top_k!r}")
-        for name in ("alpha", "beta"):  # <= 0 would reward the episodes far from the demos
-            value = getattr(self, name)
-            if not np.isfinite(value) or value <= 0:
-                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
-        length = self.episode_length
-        if length is not None and (isinstance(length, bool) or not isinstance(length, int)):
-            raise ValueError(f"episode_length must be an integer, got {length!r}")
-        if length is not None and length < 1:
-            raise ValueError(f"episode_length must be >= 1, got {length}")
 
 
 class EpisodeLabeller:

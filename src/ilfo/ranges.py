@@ -175,9 +175,10 @@ def batch(default: Any) -> Any:
     return declared(default, low=1, high=MAX_BATCH, kind="batch")
 
 
-def rng_seed(default: Any = 0) -> Any:
-    """A seed, from 0 to ``SEED_MAX``."""
-    return declared(default, low=0, high=SEED_MAX, note="jax.random.PRNGKey keeps 32 bits")
+def rng_seed(default: Any = 0, **more: Any) -> Any:
+    """A seed, from 0 to ``SEED_MAX`` (or a tuple of seeds: ``min_items``)."""
+    note = "jax.random.PRNGKey keeps 32 bits"
+    return declared(default, low=0, high=SEED_MAX, note=note, **more)
 
 
 def declaration(cls: type, name: str) -> Declared | None:
@@ -226,7 +227,8 @@ def _checked(value: Any, hint: Any, ranges: Declared | None, name: str, flag: st
         return value
     ranges = ranges or Declared()
     if base is tuple and len(value) < ranges.min_items:
-        least = f"at least {ranges.min_items} width{'s' * (ranges.min_items > 1)}"
+        noun = "width" if ranges.kind == "widths" else "value"
+        least = f"at least {ranges.min_items} {noun}{'s' * (ranges.min_items > 1)}"
         raise SettingError(name, f"{name} must hold {least}, got {value}{_flagged(flag)}")
     for item in value if base is tuple else (value,):
         integer = isinstance(item, int)

@@ -43,13 +43,33 @@ def test_rewards_are_oops_couplings_squashed_and_top_k():
     np.testing.assert_allclose(ours, reference)
     with pytest.raises(ValueError, match="top_k 3 exceeds"):
         EpisodeLabeller(expert, LabelConfig(top_k=3))
-    with pytest.raises(ValueError, match="squashing"):
-        LabelConfig(squashing="tanh")
-    for bad in ({"alpha": 0.0}, {"beta": -5.0}):  # would reward the far episodes most
-        with pytest.raises(ValueError, match="must be finite and > 0"):
-            LabelConfig(**bad)
-    with pytest.raises(ValueError, match="episode_length must be >= 1"):
-        LabelConfig(episode_length=0)
+
+
+@pytest.mark.parametrize(
+    ("bad", "message"),
+    [
+        ({"squashing": "tanh"}, "squashing must be one of 'oops', 'linear', 'exponential'"),
+        ({"alpha": 0.0}, "alpha must be positive and finite, got 0.0 (--alpha)"),
+        ({"beta": -5.0}, "beta must be positive and finite, got -5.0 (--beta)"),
+        ({"alpha": "5"}, "alpha must be a number, got '5' (str) (--alpha)"),
+        ({"top_k": 2.5}, "top_k must be an integer, got 2.5 (float) (--top-k)"),
+        ({"episode_length": 0}, "episode_length must be >= 1, got 0 (--episode-length)"),
+        ({"episode_length": 2**40}, "episode_length must be at most 2,147,483,647"),
+    ],
+)
+def test_a_bad_label_setting_is_a_one_line_error_naming_it_and_its_flag(bad, message):
+    with pytest.raises(ValueError) as refused:  # alpha, beta <= 0: the far episodes rewarded most
+        LabelConfig(**bad)
+    assert message in str(refused.value) and "\n" not in str(refused.value)
+
+
+def test_label_settings_are_held_as_their_declared_types():
+    config = LabelConfig(alpha=np.int64(3), top_k=np.int64(2), episode_length=np.int32(9))
+    assert (type(config.alpha), type(config.top_k), type(config.episode_length)) == (
+        float,
+        int,
+        int,
+    )
 
 
 def test_an_episode_is_not_penalised_for_being_short():

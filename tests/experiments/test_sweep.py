@@ -131,7 +131,7 @@ def test_a_finished_runs_config_json_as_the_spec_config_repeats_it_on_the_sweeps
         ({"config": {"seed": 3}}, "its axis"),
         ({"config": {"out": "x"}}, "sweep directory"),
         ({"seed": (0, 0)}, "twice"),
-        ({"algo": ()}, "at least one"),
+        ({"algo": ()}, "algo must hold at least 1 value"),
         ({"config": {"sac": {"tau": 0.01}}}, "no algo of the sweep uses"),
         ({"config": {"oops": {"nope": 1}}}, "no setting"),
         ({"config": {"steps": 0}}, "steps must be >= 1"),
@@ -139,12 +139,40 @@ def test_a_finished_runs_config_json_as_the_spec_config_repeats_it_on_the_sweeps
         ({"retries": -1}, "retries"),
         ({"config": {"contact_forces": False}}, "none of its envs observe"),
         ({"env": ("Hopper-v5", "Hoper-v5")}, "unknown environment 'Hoper-v5'"),
-        ({"seed": (-3,)}, "seed must be >= 0"),
+        ({"seed": (-3,)}, "seed must hold numbers that are >= 0"),
     ],
 )
 def test_bad_specs_are_refused_clearly(kwargs, message):
     with pytest.raises(ValueError, match=message):
         expand(SweepSpec(**kwargs))
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"num_demos": 2.5}, "num_demos must be a list of integers, got 2.5 (float)"),
+        ({"num_demos": (0, 1)}, "num_demos must hold numbers that are >= 1, got (0, 1)"),
+        ({"seed": (0, 2**32)}, "seed must hold numbers that are >= 0 and at most 4,294,967,295"),
+        ({"algo": ("td3", 3)}, "algo must be a list of strings, got ('td3', 3)"),
+        ({"retries": 2**40}, "retries must be at most 2,147,483,647"),
+        ({"retries": 1.5}, "retries must be an integer, got 1.5 (float)"),
+    ],
+)
+def test_a_bad_axis_or_retries_is_refused_by_the_spec_itself(kwargs, message):
+    """Declared ranges (ilfo.ranges): refused when the spec is made, before any run's config."""
+    with pytest.raises(ValueError) as refused:
+        SweepSpec(**kwargs)
+    assert message in str(refused.value) and "\n" not in str(refused.value)
+    with pytest.raises(ValueError, match=r"^spec\.json: "):  # a spec file's error names the file
+        SweepSpec.from_dict(kwargs, "spec.json")
+
+
+def test_a_spec_holds_its_axes_as_tuples_of_ints():
+    import numpy as np
+
+    spec = SweepSpec(num_demos=[np.int64(2)], seed=[np.int32(4), 5], retries=np.int64(1))
+    assert spec.num_demos == (2,) and spec.seed == (4, 5) and spec.retries == 1
+    assert {type(v) for v in (*spec.num_demos, *spec.seed, spec.retries)} == {int}
 
 
 def test_parse_seeds():
@@ -254,9 +282,12 @@ def test_a_run_with_results_and_no_checkpoint_is_unresumable_not_trained_again(t
 
 
 def test_snapshot_keeps_checkpoints_without_buffers_and_continues_as_a_sweep(tmp_path):
-    sweep = create_sweep(tmp_path / "sweep", SweepSpec(seed=(0, 1, 2), config=TINY))
-    done, partial, unstarted = (r.name for r in sweep.runs)
+    sweep = create_sweep(tmp_path / "sweep", SweepSpec(seed=(0, 1, 2, 3), config=TINY))
+    done, partial, unstarted, gone = (r.name for r in sweep.runs)
     _finish(sweep, done)
+    _finish(sweep, gone)  # a finished run whose checkpoints were removed: unresumable
+    (sweep.run_dir(gone) / "metrics.csv").write_text("step,episode\n100,1\n200,2\n300,3\n")
+    shutil.rmtree(sweep.run_dir(gone) / "checkpoints")
     _finish(sweep, partial, step=200)
     (sweep.run_dir(partial) / FINAL_POLICY_FILE).unlink()  # interrupted at step 200
     for name in (done, partial):
@@ -274,10 +305,13 @@ def test_snapshot_keeps_checkpoints_without_buffers_and_continues_as_a_sweep(tmp
         done: "done",
         partial: "checkpoint at step 200",
         unstarted: "left out (no checkpoint)",
+        gone: "unresumable (results, no checkpoint)",
     }
     copy = open_sweep(tmp_path / "copy")
     assert copy.runs == sweep.runs
-    assert [s.state for s in copy.statuses()] == ["done", "pending", "pending"]
+    assert [s.state for s in copy.statuses()] == ["done", "pending", "pending", "unresumable"]
+    for name in ("metrics.csv", FINAL_POLICY_FILE):  # its results, not started again there
+        assert (copy.run_dir(gone) / name).read_bytes() == (sweep.run_dir(gone) / name).read_bytes()
     assert copy.statuses()[1].step == 200
     assert read_attempts(copy, done) == read_attempts(sweep, done)
     assert copy.log_file(done).read_text() == "log"

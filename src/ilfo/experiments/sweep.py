@@ -33,6 +33,7 @@ from typing import Any, Literal
 
 from ilfo.experiments.attempts import read_attempts
 from ilfo.files import check_new_copy_dir, read_settings_file, write_json_atomic
+from ilfo.ranges import check_fields, count, declared, rng_seed
 
 MANIFEST_FILE = "sweep.json"
 RUNS_DIR = "runs"
@@ -54,13 +55,13 @@ RUN_STATES: tuple[RunState, ...] = ("done", "running", "unresumable", "failed", 
 class SweepSpec:
     """What a sweep runs: every combination of the axes, each with the base ``config``."""
 
-    env: tuple[str, ...] = ("Hopper-v5",)
+    env: tuple[str, ...] = declared(("Hopper-v5",), min_items=1)
     """Environment ids."""
-    algo: tuple[str, ...] = ("oops-td3",)
+    algo: tuple[str, ...] = declared(("oops-td3",), min_items=1)
     """Algorithms (``ilfo.algos``)."""
-    num_demos: tuple[int, ...] = (1,)
+    num_demos: tuple[int, ...] = count((1,), min_items=1)
     """Numbers of demos imitated."""
-    seed: tuple[int, ...] = (0,)
+    seed: tuple[int, ...] = rng_seed((0,), min_items=1)
     """Seeds."""
     config: Mapping[str, Any] = field(default_factory=dict)
     """Settings of every run, as ``ilfo train``'s flags or a config file give them
@@ -69,24 +70,18 @@ class SweepSpec:
     variants: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     """Named changes of ``config`` (e.g. ``{"lambda0.1": {"oops": {"reg": 0.1}}}``), each
     a further axis value; none: one unnamed variant, the base config."""
-    retries: int = 2
+    retries: int = count(2, low=0)
     """How many times a run that ended with an error is started again."""
 
     def __post_init__(self) -> None:
+        for name in AXES:  # one value alone is that axis's only value
+            if isinstance(getattr(self, name), (str, int)):
+                object.__setattr__(self, name, (getattr(self, name),))
+        check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
         for name in AXES:
             values = getattr(self, name)
-            if isinstance(values, (str, int)):
-                values = (values,)
-            values = tuple(values)
-            if not values:
-                raise ValueError(f"sweep {name} must list at least one value")
             if len(set(values)) != len(values):
                 raise ValueError(f"sweep {name} lists a value twice: {list(values)}")
-            object.__setattr__(self, name, values)
-        for name in ("num_demos", "seed"):
-            for value in getattr(self, name):
-                if isinstance(value, bool) or not isinstance(value, int):
-                    raise ValueError(f"sweep {name} values must be integers, got {value!r}")
         # As JSON has them (lists for tuples), so that a spec equals its manifest's copy.
         try:
             object.__setattr__(self, "config", json.loads(json.dumps(dict(self.config))))
@@ -110,8 +105,6 @@ class SweepSpec:
             bad = [key for key in change if key in AXES or key == "out"]
             if bad:
                 raise ValueError(f"variant {name!r} cannot set {', '.join(bad)}")
-        if isinstance(self.retries, bool) or not isinstance(self.retries, int) or self.retries < 0:
-            raise ValueError(f"retries must be an integer >= 0, got {self.retries!r}")
 
     def to_dict(self) -> dict[str, Any]:
         """The spec as JSON-ready data (what ``from_dict`` reads back)."""
@@ -407,13 +400,14 @@ def snapshot_sweep(root: str | Path, out: str | Path) -> dict[str, str]:
     buffer refilled by ``start_steps`` steps of the current policy, so not the exact
     continuation; on-policy runs exactly), and runs without a checkpoint start afresh.
 
-    Returns what became of each run: ``done``, ``checkpoint at step N`` or ``left out (no
-    checkpoint)``. Raises FileExistsError where ``out`` exists, and ValueError where it lies
-    inside the sweep or while any run of the sweep is running (stop the sweep first: Ctrl-C
-    checkpoints every run)."""
+    Returns what became of each run: ``done``, ``checkpoint at step N``, ``unresumable`` (its
+    results copied without a checkpoint, so that the copy reads as the sweep does and never
+    trains it again) or ``left out (no checkpoint)``. Raises FileExistsError where ``out``
+    exists, and ValueError where it lies inside the sweep or while any run of the sweep is
+    running (stop the sweep first: Ctrl-C checkpoints every run)."""
     import shutil
 
-    from ilfo.training.run_dir import checkpoint_steps, snapshot_run
+    from ilfo.training.run_dir import checkpoint_steps, copy_results, snapshot_run
 
     sweep, out = open_sweep(root), Path(out)
     check_new_copy_dir(sweep.root, out)
@@ -438,6 +432,11 @@ def snapshot_sweep(root: str | Path, out: str | Path) -> dict[str, str]:
         kept = {}
         for status in statuses:
             checkpoints = checkpoint_steps(sweep.run_dir(status.name))
+            if status.state == "unresumable":
+                (tmp / RUNS_DIR / status.name).mkdir()
+                copy_results(sweep.run_dir(status.name), tmp / RUNS_DIR / status.name)
+                kept[status.name] = "unresumable (results, no checkpoint)"
+                continue
             if not checkpoints:
                 kept[status.name] = "left out (no checkpoint)"
                 continue

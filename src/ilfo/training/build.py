@@ -29,7 +29,6 @@ from ilfo.files import file_sha256
 from ilfo.paths import default_demos_path
 from ilfo.rewards import OOPS, EpisodeReward, expert_transitions
 from ilfo.training.config import TrainConfig
-from ilfo.training.resources import check_memory
 
 
 class Agent(NamedTuple):
@@ -76,8 +75,6 @@ def make_envs(config: TrainConfig) -> tuple[gym.Env, gym.Env, EnvInfo]:
     evaluation environment (always fixed-horizon, the paper's score) and their ``EnvInfo``."""
     env = make_run_env(config, config.uses_fixed_horizon)
     info = env_info(env, config.env)
-    # Before anything is allocated: a replay buffer or networks past the machine's memory.
-    check_memory(config, info.obs_dim, info.action_dim, info.horizon)
     eval_env = make_run_env(config, True, horizon=info.horizon)
     return env, eval_env, info
 

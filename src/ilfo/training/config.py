@@ -25,7 +25,7 @@ from ilfo.algos import (
 from ilfo.composition.opolo import OPOLOConfig
 from ilfo.config import dataclass_from_dict, flag_name
 from ilfo.envs.make import CONTACT_FORCE_DIMS
-from ilfo.ranges import SettingError, check_fields, count, non_negative, rng_seed
+from ilfo.ranges import INT32_MAX, SettingError, check_fields, count, non_negative, rng_seed
 from ilfo.rewards import DiscriminatorConfig, FIRLConfig, OOPSConfig, PWILConfig
 from ilfo.rewards.oops_adv import AdversarialOOPSConfig
 from ilfo.rewards.sil import SILConfig
@@ -89,7 +89,8 @@ class TrainConfig:
     """Agent updates per environment step collected (the update-to-data ratio), run after each
     episode; 1 is the paper's. More spends compute to learn more from the same data. Off-policy
     agents only: other than 1 is an error for TRPO (sil), which learns once per batch
-    (``--trpo-batch-steps``)."""
+    (``--trpo-batch-steps``). ``steps`` times it is at most 2**31 - 1 (the agents' update
+    counters are 32-bit)."""
     preset: Literal["paper", "fast"] = "paper"
     """Agent sizes: for TD3/DDPG paper (critics 1024-1024) or fast (critics 256-256); for TD7
     paper (the authors': widths 256, batch 256) or fast (widths 128, batch 100); the part's
@@ -195,6 +196,15 @@ class TrainConfig:
                 f"updates_per_step does not apply to algo {self.algo!r}: its on-policy "
                 f"{algo.agent.upper()} agent learns once per batch of its own episodes "
                 f"(--{algo.agent}-batch-steps); leave it at 1"
+            )
+        if self.steps * self.updates_per_step > INT32_MAX:
+            # The agents count their updates in int32 (``state.step``): past it the count wraps
+            # to negative, and TD3's actor delay and TD7's target refresh lose their cadence.
+            raise ValueError(
+                f"steps * updates_per_step must be at most {INT32_MAX:,} (the agents count "
+                f"their updates in 32-bit integers), got {self.steps:,} * "
+                f"{self.updates_per_step:,} = {self.steps * self.updates_per_step:,} "
+                f"(--steps, --updates-per-step)"
             )
         angles = self.healthy_angle_range
         if angles is not None and not angles[0] < angles[1]:
@@ -353,11 +363,17 @@ def config_from_dict(raw: dict[str, Any], source: str | Path) -> TrainConfig:
     of the wrong type). A record without ``contact_forces`` predates the setting, when every
     run observed them: it reads back as True. A task-reward run's record with ``demos``
     predates their refusal, when they were ignored: it reads back without them."""
-    raw = {"contact_forces": True, **raw}
-    algo = raw.get("algo")
-    if isinstance(algo, str) and algo in ALGOS and not ALGOS[algo].imitation:
-        raw["demos"] = None
+    raw = without_task_reward_demos({"contact_forces": True, **raw}, raw.get("algo"))
     return _checked_config(raw, source)
+
+
+def without_task_reward_demos(settings: Mapping[str, Any], algo: Any) -> dict[str, Any]:
+    """A run's record (config.json) without its ``demos`` where ``algo`` learns from the task
+    reward: records from before demos were refused for it list them (they were ignored). Demos
+    given for a run (``--demos``, a settings file of one's own) are still refused."""
+    if isinstance(algo, str) and algo in ALGOS and not ALGOS[algo].imitation:
+        return {key: value for key, value in settings.items() if key != "demos"}
+    return dict(settings)
 
 
 def _checked_config(raw: Mapping[str, Any], source: str | Path) -> TrainConfig:

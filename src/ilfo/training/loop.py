@@ -45,6 +45,7 @@ from ilfo.training.console import bar_postfix, progress_bar, stop_requests
 from ilfo.training.learners import Learner, learner_of
 from ilfo.training.metrics import MetricsLog, truncate_metrics
 from ilfo.training.plots import plot_runs
+from ilfo.training.resources import check_memory
 from ilfo.training.rollout import (
     agent_observation,
     agent_observations,
@@ -115,6 +116,9 @@ class Trainer:
         self.horizon, self.obs_dim = env.horizon, env.obs_dim
         self.action_dim, self.max_action = env.action_dim, env.max_action
         demos = load_demo_set(config, env.obs_dim)
+        # Before anything large is allocated (replay, networks, an OT reward's matrices).
+        lengths = [len(d) - 1 for d in demos.observations]
+        check_memory(config, env.obs_dim, env.action_dim, env.horizon, lengths)
         self.demos, self.demo_return = demos.observations, demos.mean_return
         self.distance_probe = demos.distance_probe
         self.demo_source = demos.source

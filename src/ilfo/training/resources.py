@@ -2,7 +2,8 @@
 
 The declared ranges (``ilfo.ranges``) bound each setting alone; a run's memory is their product
 with its environment's sizes (replay capacity x observation width, network widths squared,
-batch x widths), known once the environment is made. ``check_memory`` refuses a run whose
+batch x widths), known once the environment is made, and with its demos' lengths (an optimal
+transport reward's matrices, horizon x demo atoms in float64). ``check_memory`` refuses a run whose
 estimate exceeds the machine's memory, naming the settings that need it, rather than letting
 the run fail (or the kernel kill it, without a message) at its first allocation or update.
 """
@@ -12,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import os
+from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 from ilfo.algos import AGENT_PARTS
@@ -25,6 +27,17 @@ COPIES = 4
 ACTIVATION_PASSES = 4
 """Floats per unit and sample in an update: the forward passes (online and target) and their
 gradients, roughly."""
+OT_BYTES = 8
+"""The OT solvers' matrices are float64."""
+OT_MATRICES = {
+    "sinkhorn": (4, "the cost, the kernel, Newton's plan and its scaled copy"),
+    "emd": (2, "the cost and the plan"),
+    "greedy": (2, "the cost and the plan"),
+}
+"""Episode atoms x demo atoms matrices a solver holds at once (at least: POT's network simplex
+holds more); Sinkhorn's Newton steps add a square system on the side with fewer atoms."""
+OT_REWARD_SOLVERS = {"oops_adv": "sinkhorn", "sil": "sinkhorn", "pwil": "greedy"}
+"""The solver of each OT reward but OOPS (whose config names its own)."""
 
 
 class MemoryNeed(NamedTuple):
@@ -44,10 +57,13 @@ def machine_memory() -> int | None:
     return pages * page_size if pages > 0 and page_size > 0 else None
 
 
-def memory_needs(config: Any, obs_dim: int, action_dim: int, horizon: int) -> list[MemoryNeed]:
+def memory_needs(
+    config: Any, obs_dim: int, action_dim: int, horizon: int, demo_lengths: Sequence[int] = ()
+) -> list[MemoryNeed]:
     """The estimate of a ``TrainConfig``'s run on an env of those sizes, by what needs it: the
     replay buffer (an on-policy agent's: its batch and an episode), then per part its
-    networks and its batches."""
+    networks and its batches, then with the demos' ``demo_lengths`` (their steps) its
+    optimal transport (``ot_need``)."""
     width = obs_dim + int(config.uses_fixed_horizon)  # the time feature
     row = 2 * width + action_dim + 2  # obs, next_obs, action, reward, not_done
     agent = config.agent_config(horizon)
@@ -65,7 +81,44 @@ def memory_needs(config: Any, obs_dim: int, action_dim: int, horizon: int) -> li
         parts.append((config.recipe.reward, config.part_config(config.recipe.reward)))
     for name, part in parts:
         needs += _part_needs(name, part, width + action_dim, row)
+    if demo_lengths:
+        needs.append(ot_need(config, horizon, demo_lengths))
     return needs
+
+
+def ot_need(config: Any, horizon: int, demo_lengths: Sequence[int]) -> MemoryNeed:
+    """The largest optimal transport solve of a run imitating demos of ``demo_lengths`` steps:
+    its reward's, an episode of ``horizon`` atoms against a demo (OOPS: the longest, or all
+    of them pooled; PWIL: all of them, subsampled), or the OT distance that evaluations log
+    (Sinkhorn against the first demo), whichever is larger; they are not solved at once."""
+    solves = []
+    reward = config.recipe.reward
+    if reward == "oops":
+        oops = config.part_config("oops")
+        pooled = oops.demo_selection == "pooled"
+        demo = sum(demo_lengths) if pooled else max(demo_lengths)
+        # ``nearest`` keeps each demo's plan until it has chosen one.
+        kept = len(demo_lengths) - 1 if oops.demo_selection == "nearest" else 0
+        solves.append((f"OOPS's {oops.solver}", oops.solver, demo, kept))
+    elif reward in OT_REWARD_SOLVERS:
+        solver = OT_REWARD_SOLVERS[reward]
+        demo = max(demo_lengths)
+        if reward == "pwil":
+            pwil = config.part_config("pwil")
+            demo = -(-sum(demo_lengths) // pwil.subsample)
+        solves.append((f"{reward.upper()}'s {solver}", solver, demo, 0))
+    solves.append(("the evaluations' OT distance (Sinkhorn)", "sinkhorn", demo_lengths[0], 0))
+    needs = []
+    for what, solver, demo, kept in solves:
+        count, held = OT_MATRICES[solver]
+        floats = (count + kept) * horizon * demo
+        shown = f"{what}: horizon {horizon:,} x {demo:,} demo atoms x {count + kept} matrices"
+        shown += f" ({held}{f', {kept} more plans' if kept else ''})"
+        if solver == "sinkhorn":
+            floats += min(horizon, demo) ** 2
+            shown += f" + {min(horizon, demo):,}^2 (Newton's system)"
+        needs.append(MemoryNeed(f"{shown}, float64 (--horizon)", floats * OT_BYTES))
+    return max(needs, key=lambda need: need.bytes)
 
 
 def _part_needs(name: str, part: Any, inputs: int, row: int) -> list[MemoryNeed]:
@@ -100,13 +153,16 @@ def _part_needs(name: str, part: Any, inputs: int, row: int) -> list[MemoryNeed]
     return needs
 
 
-def check_memory(config: Any, obs_dim: int, action_dim: int, horizon: int) -> None:
+def check_memory(
+    config: Any, obs_dim: int, action_dim: int, horizon: int, demo_lengths: Sequence[int] = ()
+) -> None:
     """A ValueError where the run's estimate (``memory_needs``) exceeds this machine's memory,
     naming the largest needs; nothing where the system does not say how much it has."""
     available = machine_memory()
     if available is None:
         return
-    needs = sorted(memory_needs(config, obs_dim, action_dim, horizon), key=lambda n: -n.bytes)
+    needs = memory_needs(config, obs_dim, action_dim, horizon, demo_lengths)
+    needs.sort(key=lambda n: -n.bytes)
     total = sum(n.bytes for n in needs)
     if total <= available:
         return

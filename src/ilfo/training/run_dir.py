@@ -296,11 +296,16 @@ def read_settings(path: str | Path) -> dict[str, Any]:
     """A settings file (``files.read_settings_file``), read as the run record it is where it is
     a run's config.json (one beside its run's metrics.csv): then, as ``read_run_config``
     reads it, with the episodes that run trained on, so that ``--config RUN/config.json``
-    repeats the run even where its algo's default has changed since."""
+    repeats the run even where its algo's default has changed since (and without the demos a
+    task-reward run's old record lists: ``config.without_task_reward_demos``)."""
     path = Path(path)
     settings = read_settings_file(path)
     if path.name == CONFIG_FILE and (path.parent / METRICS_FILE).is_file():
-        return _with_episodes_as_run(settings)
+        from ilfo.training.config import without_task_reward_demos
+
+        # A task-reward run's record from before demos were refused for it may list them.
+        record = _with_episodes_as_run(settings)
+        return without_task_reward_demos(record, record.get("algo"))
     return settings
 
 
@@ -378,6 +383,14 @@ SNAPSHOT_FILES = (
 """What ``snapshot_run`` copies besides the newest checkpoint (each where it exists)."""
 
 
+def copy_results(run_dir: Path, out: Path) -> None:
+    """Copy the ``SNAPSHOT_FILES`` run ``run_dir`` holds (its config, demos record, metrics,
+    policies) into directory ``out``, which must exist."""
+    for name in SNAPSHOT_FILES:
+        if (run_dir / name).is_file():
+            shutil.copy2(run_dir / name, out / name)
+
+
 def snapshot_run(run_dir: str | Path, out: str | Path) -> Path:
     """A copy of a run small enough to keep in git or move between machines: its config,
     metrics, policies and newest complete checkpoint without the replay buffer (the agent's and
@@ -409,9 +422,7 @@ def snapshot_run(run_dir: str | Path, out: str | Path) -> Path:
         tmp = out.with_name(f".{out.name}.tmp")
         shutil.rmtree(tmp, ignore_errors=True)
         (tmp / CHECKPOINTS_DIR).mkdir(parents=True)
-        for name in SNAPSHOT_FILES:
-            if (run_dir / name).is_file():
-                shutil.copy2(run_dir / name, tmp / name)
+        copy_results(run_dir, tmp)
         target = tmp / CHECKPOINTS_DIR / checkpoint.name
         if keeps_buffer:
             shutil.copytree(checkpoint, target)
