@@ -242,7 +242,7 @@ def start_summary(
         lines.append(f"  demos: {demos.path} (its first {first})")
     resumed = f", from step {step:,}" if step else ""
     lines.append(f"  steps: {config.steps:,}{resumed}; evaluated every {config.eval_every:,}")
-    settings = {"algo": config.algo, "preset": config.preset}
+    settings = {"algo": config.algo, "env": config.env, "preset": config.preset}
     seconds = run_core_seconds(
         {**settings, "updates_per_step": config.updates_per_step}, config.steps - step
     )

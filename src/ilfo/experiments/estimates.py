@@ -1,34 +1,39 @@
 """What runs cost on one core: the measured rates that ``ilfo reproduce``'s plans and
 ``ilfo train``'s start summary estimate compute from (``run_core_seconds``, the one estimate
-of a run), each with where and when it was measured."""
+of a run): steps per second from ``rates.json`` (data that ``bench/rates.py`` writes from the
+kept runs), and the other costs each with where and when it was measured."""
 
 from __future__ import annotations
 
 import functools
+import json
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 from ilfo.algos import ALGOS
 from ilfo.training.config import TrainConfig, preset_changes_agent
 
-STEPS_PER_CORE_SECOND: dict[str, float] = {
-    "oops-td3": 300.0,
-    "oops-ddpg": 300.0,
-    "oops-sac": 120.0,
-    "pwil-td3": 300.0,
-    "gaifo-td3": 92.0,
-    "opolo": 70.0,
-    "firl-fkl": 77.0,
-    "oops-adv-td3": 140.0,
-    "sil": 300.0,
-}
-"""For the estimate only, steps per second of one core at the fast preset. oops-td3, oops-ddpg
-and pwil-td3: the 8-task sweep's 1M-step Walker2d runs, each pinned to one core beside another
-run, evaluations included (52 and 50 min: 320 and 332 steps/s, 2026-12-04, docs/benchmarks.md,
-"OOPS+TD3 and PWIL-(s) on the eight tasks"); the others
-half the 2-core loop rates of ``bench/train.py`` (docs/benchmarks.md, 2026-12-01; Hopper), and
-oops-adv-td3 and sil from short probes on Hopper (2026-12-02), so likely on the low side. The
-paper preset runs at about a third of the fast one."""
+RATES_FILE = Path(__file__).with_name("rates.json")
+"""The measured steps per second of one core, by algo and env: written by ``bench/rates.py``
+from the kept runs' metrics.csv (each run pinned to one core beside another, evaluations
+included), with the date, machine and commit of that measurement."""
+
+
+@functools.cache
+def measured_rates() -> Mapping[str, Any]:
+    """``RATES_FILE``'s rates by algo: ``steps_per_s`` (the median over its kept runs), ``runs``
+    and ``envs`` (the median per env)."""
+    return json.loads(RATES_FILE.read_text())["algos"]
+
+
+def steps_per_core_second(algo: str, env: str | None = None) -> float | None:
+    """The measured rate of ``algo`` at the fast preset: on ``env`` where its runs include that
+    env, else the median over all its runs; None for an algo with no kept run."""
+    rates = measured_rates().get(algo)
+    if rates is None:
+        return None
+    return rates["envs"].get(env, rates["steps_per_s"])
 
 
 UPDATE_SHARE: dict[str, float] = {"fast": 0.7, "paper": 0.96}
@@ -47,7 +52,7 @@ its programs and what else does not scale with its steps; nearly all of a tiny r
 on one smoke run (``SMOKE_CONFIG``: 400 steps, two evaluations of one 100-step episode) of
 oops-td3 on Hopper, ``ilfo train`` with ``ILFO_COMPILATION_CACHE=off`` (a first run's
 compilation): 33.7 s of CPU time, user and system (92 s wall beside two pinned runs), less
-its 400 steps at ``STEPS_PER_CORE_SECOND`` (1.3 s); 2026-12-07, the 2-core Intel Xeon
+its 400 steps at the measured rate (1.3 s); 2026-12-07, the 2-core Intel Xeon
 machine. Algos that compile more programs (opolo, firl-fkl) likely cost more, a start that
 finds its programs in the compilation cache less."""
 
@@ -65,17 +70,19 @@ def run_core_seconds(
 ) -> float | None:
     """One core's estimated seconds for ``steps`` steps of a run with ``config``'s algo,
     preset and updates per step (a sweep's settings, ``ilfo train``'s defaults where absent):
-    its fixed cost (``RUN_FIXED_CORE_SECONDS``) and its steps at ``STEPS_PER_CORE_SECOND``,
+    its fixed cost (``RUN_FIXED_CORE_SECONDS``) and its steps at ``steps_per_core_second``
+    (its env's rate where measured),
     a third of it at the paper preset where that changes the agent, times ``UPDATE_SHARE``'s
     cost of more updates per step. 0 for no steps; None for an algo without a measured rate,
     unless ``unmeasured_rate`` (steps/s at the fast preset) stands in for one."""
     algo = config["algo"]
-    rate = STEPS_PER_CORE_SECOND.get(algo, unmeasured_rate)
+    rate = steps_per_core_second(algo, config.get("env"))
+    rate = unmeasured_rate if rate is None else rate
     if steps <= 0:
         return 0.0
     if rate is None:
         return None
-    if config.get("preset", "paper") == "paper" and _preset_changes_agent(algo):
+    if config.get("preset", "paper") == "paper" and preset_changes_agent_of(algo):
         rate /= 3
     return RUN_FIXED_CORE_SECONDS + steps / rate * _updates_cost(config)
 
@@ -90,7 +97,7 @@ def _updates_cost(config: Mapping[str, Any]) -> float:
 
 
 @functools.cache
-def _preset_changes_agent(algo: str) -> bool:
+def preset_changes_agent_of(algo: str) -> bool:
     """Whether ``--preset`` changes the algo's agent (TD3 and DDPG's critics; not SAC, OPOLO or
     the baselines' authors' settings), so that the paper preset runs slower than the rates."""
     return algo in ALGOS and preset_changes_agent(TrainConfig(algo=algo))
