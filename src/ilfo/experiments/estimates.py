@@ -24,20 +24,21 @@ STEPS_PER_CORE_SECOND: dict[str, float] = {
 }
 """For the estimate only, steps per second of one core at the fast preset. oops-td3, oops-ddpg
 and pwil-td3: the 8-task sweep's 1M-step Walker2d runs, each pinned to one core beside another
-run, evaluations included (52 and 50 min: 320 and 332 steps/s, 2026-12-04, docs/benchmarks.md,
-"OOPS+TD3 and PWIL-(s) on the eight tasks"); the others
-half the 2-core loop rates of ``bench/train.py`` (docs/benchmarks.md, 2026-12-01; Hopper), and
+run, evaluations included (52 and 50 min: 320 and 332 steps/s, 2026-12-04; the wall times in
+docs/results/runs/Walker2d-v5__oops-td3__0 and in the PWIL-(s) run on the fixed horizon,
+docs/results/probes/Walker2d-v5__pwil-td3__0__fixed-horizon); the others half the 2-core loop
+rates of ``bench/train.py`` (docs/notes/benchmarks-history.md, 2026-12-01; Hopper), and
 oops-adv-td3 and sil from short probes on Hopper (2026-12-02), so likely on the low side. The
 paper preset runs at about a third of the fast one."""
 
 
 UPDATE_SHARE: dict[str, float] = {"fast": 0.7, "paper": 0.96}
 """For the estimate only: the share of an off-policy step's time spent in its update at one
-update per step, by preset (``bench/train.py``, docs/benchmarks.md: at the fast preset the loop
-ran 1070, 624 and 361 steps/s at one, two and four updates per step; at the paper preset the
-updates were 96% of a step). N updates per step cost (1 - share) + share * N times as much.
-Measured on TD3 and used for every off-policy algo: an algo whose step goes more to its reward
-(oops-adv-td3, opolo) is costed a little high."""
+update per step, by preset (``bench/train.py``, docs/notes/benchmarks-history.md: at the fast
+preset the loop ran 1070, 624 and 361 steps/s at one, two and four updates per step; at the
+paper preset the updates were 96% of a step). N updates per step cost (1 - share) + share * N
+times as much. Measured on TD3 and used for every off-policy algo: an algo whose step goes
+more to its reward (oops-adv-td3, opolo) is costed a little high."""
 
 
 RUN_FIXED_CORE_SECONDS = 32.0
