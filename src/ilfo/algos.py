@@ -420,7 +420,7 @@ RECIPES: tuple[Recipe, ...] = (
         part_defaults=_firl_defaults,
         # The authors' SAC ends episodes at falls, where its entropy bonus makes staying up pay;
         # with termination ignored, the learned r(s) is too flat beside temperature 0.2 and the
-        # policy stays near random on the floor (docs/benchmarks.md, Hopper).
+        # policy stays near random on the floor (docs/results.md, f-IRL on Hopper).
         fixed_horizon=False,
         start_steps=1000,
     ),
