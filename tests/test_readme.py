@@ -31,7 +31,9 @@ def test_readme_python_blocks_run(tmp_path, monkeypatch):
 
 def test_readme_links_to_every_docs_page():
     links = set(LINK.findall(README.read_text()))
-    unlinked = [p.name for p in PAGES[2:] if f"docs/{p.name}" not in links]
+    # docs/changelog.md is CHANGELOG.md, which the README links, included for the docs site.
+    pages = [p for p in PAGES[2:] if p.name != "changelog.md"]
+    unlinked = [p.name for p in pages if f"docs/{p.name}" not in links]
     assert not unlinked, f"README.md links to no {unlinked}"
 
 
@@ -49,8 +51,8 @@ def test_relative_links_resolve(page):
 
 
 def test_readme_test_command_is_what_ci_runs():
-    ci_command = (ROOT / ".ci" / "run").read_text().strip().splitlines()[-1]
-    assert ci_command.startswith("python3 -m venv .venv")
+    ci_lines = (ROOT / ".ci" / "run").read_text().splitlines()
+    [ci_command] = [line for line in ci_lines if line.startswith("python3 -m venv .venv")]
     assert ci_command in [line for block in _blocks("bash") for line in block.splitlines()]
 
 

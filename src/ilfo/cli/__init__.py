@@ -24,11 +24,12 @@ from ilfo.cli.train import (
 )
 from ilfo.compilation_cache import enable_compilation_cache
 
-__all__ = ["main"]
+__all__ = ["build_parser", "main"]
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``ilfo`` console script."""
+def build_parser() -> Parser:
+    """The ``ilfo`` command's parser, with every subcommand's (docs/cli.md is generated from
+    it: ``python scripts/gen_cli_reference.py``)."""
     parser = Parser(  # its subcommands' parsers are of its class
         prog="ilfo",
         description="Imitation learning from observation (OOPS and its peers).",
@@ -49,6 +50,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     _add_sweep_parser(sub)
     _add_report_parser(sub)
     _add_reproduce_parser(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``ilfo`` console script."""
+    parser = build_parser()
     args, rest = parser.parse_known_args(argv)
     if rest and not getattr(args, "takes_train_flags", False):
         parser.error(f"unrecognized arguments: {' '.join(rest)}")

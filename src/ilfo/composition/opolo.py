@@ -305,7 +305,8 @@ def make_opolo(
     Args:
         config: hyperparameters.
         obs_dim: the agent's observation size (time feature included where the run has one).
-        action_dim, max_action: the action box [-max_action, max_action]^action_dim.
+        action_dim: the action box is [-max_action, max_action]^action_dim.
+        max_action: the bound, positive and the same in every dimension.
         setup: the learned reward and expert data (``ilfo.composition.learned.LearnedRewardSetup``);
             the reward is OPOLO's discriminator.
     """
