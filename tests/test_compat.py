@@ -12,11 +12,15 @@ import json
 import shutil
 from pathlib import Path
 
+import pytest
+
 from ilfo.cli import main
 from ilfo.evaluate import evaluate_run
 from ilfo.paths import bundled_demos
 from ilfo.training import Trainer, load_run_policy
 from tiny_run import metrics_rows
+
+pytestmark = pytest.mark.integration  # each test resumes a run
 
 FIXTURES = Path(__file__).parent / "fixtures"
 

@@ -236,7 +236,12 @@ def test_the_algo_names_are_the_registry():
     assert list(get_args(Algo)) == list(ALGOS)
     for name, recipe in ALGOS.items():
         config = TrainConfig(algo=name)
-        assert config.imitation == (recipe.reward is not None)
+        # An algo with a reward part imitates demos; one without refuses them, not ignores them.
+        if recipe.reward is None:
+            with pytest.raises(ValueError, match="learns from the task reward"):
+                TrainConfig(algo=name, demos="demos.npz")
+        else:
+            assert TrainConfig(algo=name, demos="demos.npz").demos == "demos.npz"
         resolved = config.resolved(100)
         used = {recipe.agent, recipe.reward} - {None}
         assert {part for part in PART_CONFIGS if getattr(resolved, part) is not None} == used

@@ -20,12 +20,11 @@ from ilfo.agents.td7 import TD7Config
 from ilfo.algos import ALGOS
 from ilfo.cli import main
 from ilfo.labelling import LabelConfig
-from ilfo.paths import bundled_demos
 from ilfo.ranges import INT32_MAX, SettingError, declaration
 from ilfo.rewards import OOPSConfig
 from ilfo.training import TrainConfig, config_from_dict
+from tiny_run import DEMOS
 
-DEMOS = str(bundled_demos("Hopper-v5-scripted"))
 GUARDS = {  # small, so that a bad value that slipped through would not start a long run
     "--steps": "200",
     "--start-steps": "100",

@@ -122,6 +122,7 @@ OPOLO = dict(
 )  # fmt: skip
 
 
+@pytest.mark.integration
 def test_opolo_trains_deterministically_and_resume_equals_uninterrupted(tmp_path):
     full = metrics_rows(train_tiny(tmp_path, "full", **OPOLO))
     assert full == metrics_rows(train_tiny(tmp_path, "again", **OPOLO))
