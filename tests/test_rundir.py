@@ -18,6 +18,7 @@ import pytest
 from ilfo import demos
 from ilfo.cli import main
 from ilfo.training import TrainConfig, Trainer
+from ilfo.training.checkpoint import snapshot_run
 from ilfo.training.run_dir import (
     FAULT_ENV,
     RunDirInUse,
@@ -25,7 +26,6 @@ from ilfo.training.run_dir import (
     create_run_dir,
     latest_checkpoint,
     results_past_first_checkpoint,
-    snapshot_run,
 )
 from tiny_run import DEMOS, metrics_rows, train_tiny
 from tiny_run import TINY_RUN as TINY_RUN
@@ -95,17 +95,16 @@ def test_resume_finds_the_newest_complete_checkpoint_and_removes_leftovers(tmp_p
     run = train_tiny(tmp_path, "run", steps=300, checkpoint_every=100)
     root = run / "checkpoints"
     assert [p.name for p in root.iterdir()] == ["step_000000300"]  # older ones removed
-    # What kills at other moments leave: a half-written checkpoint, a stale pointer of an older
-    # ilfo, an older checkpoint not yet removed, and an incomplete directory.
+    # What kills at other moments leave: a half-written checkpoint, an older checkpoint not yet
+    # removed, and an incomplete directory (an older ilfo's stale pointer: test_compat).
     (root / ".tmp_step_000000400").mkdir()
     (root / ".tmp_step_000000400" / "agent.msgpack").write_bytes(b"\x00" * 10)
-    (root / "latest").write_text("step_000000100")
     (root / "step_000000200").mkdir()  # an older one whose removal was cut short
     (root / "step_000000200" / "replay.npz").write_bytes(b"\x00" * 10)
     assert latest_checkpoint(run).name == "step_000000300"
     trainer = Trainer.resume(run, progress=False, steps=400)
     assert trainer.step == 300
-    assert not (root / ".tmp_step_000000400").exists() and not (root / "latest").exists()
+    assert not (root / ".tmp_step_000000400").exists()
     assert not (root / "step_000000200").exists()
     assert metrics_rows(trainer.train()) == full
 
@@ -602,8 +601,6 @@ def test_a_snapshot_leaves_the_buffer_out_and_resumes_after_refilling_it(tmp_pat
 def test_a_snapshot_taken_mid_refill_keeps_refilling(tmp_path):
     run = train_tiny(tmp_path, "run", steps=400)
     out = tmp_path / "carried"
-    from ilfo.training.run_dir import snapshot_run
-
     with pytest.raises(ValueError, match="inside"):  # a copy into what it copies
         snapshot_run(run, run / "carried")
     snapshot_run(run, out)
@@ -622,8 +619,6 @@ def test_a_snapshot_taken_mid_refill_keeps_refilling(tmp_path):
 def test_an_on_policy_run_continues_exactly_from_a_snapshot(tmp_path):
     """Its buffer is the batch collected since its last update, part of its state: the
     snapshot keeps it (and a snapshot without it, from before, is refused clearly)."""
-    from ilfo.training.run_dir import snapshot_run
-
     sil = dict(algo="sil", trpo={"hidden": (16, 16), "batch_steps": 200, "value_iters": 5},
                sil={"critic_hidden": (16, 16), "critic_features": 8})  # fmt: skip
     full = train_tiny(tmp_path, "full", steps=500, **sil)

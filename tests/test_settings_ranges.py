@@ -230,14 +230,6 @@ def test_more_updates_than_the_agents_int32_counter_holds_are_refused_up_front()
         config_from_dict({"steps": 2**30, "updates_per_step": 2}, "config.json")
 
 
-def test_a_task_reward_record_with_demos_reads_back_without_them():
-    """Records from before demos were refused for the task reward (they were ignored)."""
-    record = {**dataclasses.asdict(TrainConfig(algo="td3")), "demos": DEMOS}
-    assert config_from_dict(record, "config.json").demos is None
-    with pytest.raises(ValueError, match="do not apply to algo 'td3'"):
-        TrainConfig(**record)
-
-
 RESULTS = Path(__file__).parents[1] / "docs" / "results"
 KEPT_CONFIGS = sorted(RESULTS.glob("runs/*/config.json")) + sorted(
     RESULTS.glob("controls/*/config.json")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ilfo.cli import main
-from ilfo.training import TrainConfig, Trainer, load_demos
+from ilfo.training import TrainConfig, Trainer, load_demos, read_run_config
 from ilfo.training.metrics import METRIC_FIELDS
 from ilfo.training.run_dir import latest_checkpoint
 from tiny_run import DEMOS, TINY_RUN, metrics_rows, train_tiny
@@ -322,7 +322,9 @@ def test_a_run_records_the_demo_file_it_imitates_and_warns_if_it_changes(tmp_pat
         Trainer.resume(run, progress=False, steps=300)._lock.release()
     assert json.loads((run / "demos.json").read_text())["sha256"] == first_sha
 
-    (run / "demos.json").unlink()  # a run from before the record
+    (run / "demos.json").unlink()  # a run from before the record, and its format numbers
+    config = json.loads((run / "config.json").read_text())
+    (run / "config.json").write_text(json.dumps({k: v for k, v in config.items() if k != "format"}))
     Trainer.resume(run, progress=False, steps=300)._lock.release()
     record = json.loads((run / "demos.json").read_text())
     assert record["since_step"] == 200 and record["sha256"] != first_sha
@@ -403,7 +405,7 @@ def test_cli_agent_and_rewarder_flags_reach_config_json_and_resume(tmp_path, cap
     assert td3["tau"] == 0.003 and td3["loss"] == "pal" and td3["max_time"] == 100
     assert oops["reg"] == 0.1 and oops["seed"] == 2 and oops["solver"] == "sinkhorn"
     assert saved["sac"] is None and saved["pwil"] is None
-    config = TrainConfig(**saved)
+    config = TrainConfig(**read_run_config(run))  # config.json's settings beside its format
     assert config.td3.critic_hidden == (64, 64) and config.oops.reg == 0.1
 
     assert main(["train", "--resume", str(run), "--steps", "400", "--no-progress"]) == 0

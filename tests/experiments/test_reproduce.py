@@ -209,7 +209,7 @@ def test_table1_smoke_runs_into_a_report(tmp_path, capsys, monkeypatch):
     cached = json.loads((oops[0].run_dir / "distances.json").read_text())  # cached in the run
     assert cached["key"]["trained_step"] == oops[0].trained_step == oops[0].steps
     # A run's snapshot (sweeps carried between machines) keeps its measures.
-    from ilfo.training.run_dir import snapshot_run
+    from ilfo.training.checkpoint import snapshot_run
 
     carried = snapshot_run(oops[0].run_dir, tmp_path / "carried")
     for name in ("distances.json", "solvers.json"):
