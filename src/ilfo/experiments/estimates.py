@@ -38,8 +38,8 @@ def steps_per_core_second(algo: str, env: str | None = None) -> float | None:
 
 UPDATE_SHARE: dict[str, float] = {"fast": 0.7, "paper": 0.96}
 """For the estimate only: the share of an off-policy step's time spent in its update at one
-update per step, by preset (``bench/train.py``, docs/notes/benchmarks-history.md: at the fast
-preset the loop ran 1070, 624 and 361 steps/s at one, two and four updates per step; at the
+update per step, by preset (``bench/train.py``; docs/benchmarks.md as of commit 446cbed: at the
+fast preset the loop ran 1070, 624 and 361 steps/s at one, two and four updates per step; at the
 paper preset the updates were 96% of a step). N updates per step cost (1 - share) + share * N
 times as much. Measured on TD3 and used for every off-policy algo: an algo whose step goes
 more to its reward (oops-adv-td3, opolo) is costed a little high."""

@@ -70,8 +70,8 @@ SMALL_OOPS_CONFIG: dict[str, Any] = {**SMALL_CONFIG, "updates_per_step": 4}
 With the paper's one update per step OOPS+TD3 on Hopper sits on its plateau (standing,
 falling) to 300k for most seeds: 0.17 +- 0.25 of the expert over seeds 0-7, one above 0.8, so
 the variants would be compared on plateaus; with four, 0.85 +- 0.26, seven of eight above 0.8
-(``bench/learning.py``, docs/notes/benchmarks-history.md, "two updates per environment step"),
-at about three times the compute per step.
+(``bench/learning.py``; docs/benchmarks.md as of commit 446cbed, "two updates per
+environment step"), at about three times the compute per step.
 On-policy algos (sil) keep one: ``updates_per_step`` does not apply to them."""
 FULL_CONFIG: dict[str, Any] = {"steps": 1_000_000, "preset": "paper"}
 
