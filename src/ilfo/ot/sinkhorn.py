@@ -82,7 +82,7 @@ def sinkhorn(
             (over-relaxation only) or ``none`` (plain Sinkhorn).
 
     Returns:
-        An :class:`OTResult`; ``converged`` is whether its ``marginal_error`` (absolute, on the
+        An ``OTResult``; ``converged`` is whether its ``marginal_error`` (absolute, on the
         returned plan) is below ``tol * sum(a)``: False if that was not met within ``max_iter``.
     """
     cost, a, b = check_problem(cost, a, b)

@@ -1,6 +1,6 @@
 """Run directories: created once and owned by one process; checkpoints found by what is on disk.
 
-What a run directory holds is described in :mod:`ilfo.training`. The rules here keep many runs
+What a run directory holds is described in ``ilfo.training``. The rules here keep many runs
 started together (a sweep) from mixing, and keep a run resumable whatever moment it was killed:
 
 - ``create_run_dir`` makes a new directory with an exclusive ``mkdir``: two runs started in the
