@@ -34,7 +34,7 @@ from ilfo.experiments.attempts import (
     unended_workers,
 )
 from ilfo.experiments.sweep import LAUNCH_LOCK, RunStatus, Sweep, run_status, summary, sweep_labels
-from ilfo.experiments.worker import EXIT_BUSY, PARENT_SIGNAL_ENV
+from ilfo.experiments.worker_protocol import EXIT_BUSY, PARENT_SIGNAL_ENV
 from ilfo.threads import thread_environment
 
 EXIT_INTERRUPTED = 130
