@@ -10,6 +10,7 @@ import pytest
 from ilfo.cli import main
 from ilfo.training import TrainConfig, Trainer, load_demos, read_run_config
 from ilfo.training.metrics import METRIC_FIELDS
+from ilfo.training.migrations import upgrade_run_config
 from ilfo.training.run_dir import latest_checkpoint
 from tiny_run import DEMOS, TINY_RUN, metrics_rows, train_tiny
 
@@ -244,8 +245,10 @@ def test_contact_forces_default_to_off_for_imitation_on_ant_and_humanoid_only():
         TrainConfig(env="Hopper-v5", contact_forces=False)
     # config.json records what the run observed, not None.
     assert TrainConfig(env="Ant-v5").resolved(1000).contact_forces is False
-    # A record written before the setting existed observed them; settings without it default.
-    assert config_from_dict({"env": "Ant-v5"}, "old config.json").contact_forces is True
+    # A record written before the setting existed observed them (migrations upgrades it when
+    # read: tests/test_compat.py); settings without it default.
+    old = config_from_dict(upgrade_run_config({"env": "Ant-v5"}, "old config.json"), "old")
+    assert old.contact_forces is True
     assert config_from_settings({"env": "Ant-v5"}, "spec").observes_contact_forces is False
 
 
