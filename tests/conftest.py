@@ -24,3 +24,11 @@ def _sb3_logs(tmp_path_factory):
     # Stable-Baselines3 makes a log directory in /tmp at each learn() unless told where; the
     # tests' go with pytest's temporary files (subprocesses, such as the example, inherit it).
     os.environ["SB3_LOGDIR"] = str(tmp_path_factory.mktemp("sb3_logs"))
+
+
+def pytest_addoption(parser):
+    parser.addoption(
+        "--update-golden",
+        action="store_true",
+        help="rewrite tests/golden/ from the current code (tests/agents/test_golden.py)",
+    )

@@ -24,6 +24,7 @@ OOPS_ADV_TINY = dict(
 )
 
 
+@pytest.mark.integration
 def test_sil_learns_once_per_batch_deterministically_and_resumes_mid_batch(tmp_path):
     full = metrics_rows(train_tiny(tmp_path, "full", **SIL_TINY))
     assert full == metrics_rows(train_tiny(tmp_path, "again", **SIL_TINY))
@@ -40,6 +41,7 @@ def test_sil_learns_once_per_batch_deterministically_and_resumes_mid_batch(tmp_p
     assert metrics_rows(trainer.train()) == full
 
 
+@pytest.mark.integration
 def test_an_on_policy_policy_is_evaluated_again_only_after_it_learns(tmp_path):
     from ilfo.training import LoopHooks
 
@@ -63,6 +65,7 @@ def test_an_on_policy_policy_is_evaluated_again_only_after_it_learns(tmp_path):
     assert by_step[300] == by_step[200] and by_step[500] == by_step[400]
 
 
+@pytest.mark.integration
 def test_oops_adv_trains_deterministically_and_resume_equals_uninterrupted(tmp_path):
     full = metrics_rows(train_tiny(tmp_path, "full", **OOPS_ADV_TINY))
     assert full == metrics_rows(train_tiny(tmp_path, "again", **OOPS_ADV_TINY))
@@ -72,6 +75,7 @@ def test_oops_adv_trains_deterministically_and_resume_equals_uninterrupted(tmp_p
     assert metrics_rows(trainer.train()) == full
 
 
+@pytest.mark.integration
 def test_oops_adv_reward_differs_from_oops_with_a_fixed_cosine_cost(tmp_path):
     adv = metrics_rows(train_tiny(tmp_path, "adv", **{**OOPS_ADV_TINY, "steps": 200}))
     cos = metrics_rows(
@@ -87,6 +91,7 @@ def test_oops_adv_reward_differs_from_oops_with_a_fixed_cosine_cost(tmp_path):
     assert [r["proxy_return"] for r in adv] != [r["proxy_return"] for r in cos]
 
 
+@pytest.mark.integration
 def test_sil_flags_reach_config_json_and_the_policy_reads_back(tmp_path, capsys):
     args = ["train", "--algo", "sil", "--env", "Hopper-v5", "--demos", TINY_RUN["demos"]]
     args += ["--horizon", "50", "--steps", "100", "--eval-every", "100", "--eval-episodes", "1"]
@@ -105,6 +110,7 @@ def test_sil_flags_reach_config_json_and_the_policy_reads_back(tmp_path, capsys)
     assert evaluated["episodes"] == 1 and np.isfinite(evaluated["score_mean"])
 
 
+@pytest.mark.integration
 def test_sil_trains_on_standard_episodes_by_default_and_learns_per_batch(tmp_path):
     assert not TrainConfig(algo="sil").uses_fixed_horizon  # the authors' code: falls end them
     assert TrainConfig(algo="oops-adv-td3").uses_fixed_horizon  # ilfo's imitation protocol

@@ -148,6 +148,7 @@ def test_demos_collect_refuses_a_negative_seed(tmp_path, capsys):
     assert "seeds must be >= 0, got -1" in capsys.readouterr().err and not out.exists()
 
 
+@pytest.mark.integration
 def test_an_accelerator_jax_cannot_start_is_a_clear_error():
     # Without a CUDA build of JAX, JAX_PLATFORMS=cuda ends in a bare AssertionError inside JAX.
     import os

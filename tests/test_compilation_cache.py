@@ -57,6 +57,7 @@ def _probe(tmp_path: Path, **env: str) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.integration
 def test_enabled_cache_receives_compiled_programs(tmp_path):
     cache = tmp_path / "cache"
     assert _probe(tmp_path, **{ENV_VAR: str(cache)}) == {"used": str(cache), "jax": str(cache)}
@@ -66,6 +67,7 @@ def test_enabled_cache_receives_compiled_programs(tmp_path):
     assert any(default.iterdir())
 
 
+@pytest.mark.integration
 def test_users_own_jax_setting_wins_unless_ilfo_is_told(tmp_path):
     own = str(tmp_path / "own")
     assert _probe(tmp_path, JAX_COMPILATION_CACHE_DIR=own) == {"used": own, "jax": own}

@@ -135,49 +135,13 @@ def test_resolved_config_builds_the_same_agent_and_rewarder():
     assert TrainConfig(algo="firl-fkl").resolved(100).fixed_horizon is False
 
 
-def test_pwil_trains_on_standard_episodes_and_its_older_runs_on_the_fixed_horizon(tmp_path):
-    from ilfo.training import config_from_dict, read_run_config
-
+def test_pwil_trains_on_standard_episodes():
+    """(Its older runs, recorded with the episodes unresolved, read as the fixed horizon they
+    ran: test_compat.)"""
     pwil = TrainConfig(algo="pwil-td3")
     assert not pwil.uses_fixed_horizon and pwil.resolved(1000).fixed_horizon is False
     assert not pwil.agent_config(1000).time_augmentation  # no time feature without a horizon
     assert TrainConfig(algo="pwil-td3", fixed_horizon=True).uses_fixed_horizon  # as asked
-    # A config.json from before records held the resolved episodes says None: a PWIL-(s) run
-    # then trained on the fixed horizon, and resumes and reports so. A sweep's manifest, read
-    # with config_from_dict alone, keeps None: its runs take the algo's default.
-    for algo, as_run in (("pwil-td3", True), ("oops-td3", None), ("firl-fkl", None)):
-        record = {**dataclasses.asdict(TrainConfig(algo=algo)), "fixed_horizon": None}
-        run = tmp_path / algo
-        run.mkdir()
-        (run / "config.json").write_text(json.dumps(record))
-        assert read_run_config(run)["fixed_horizon"] is as_run
-        assert config_from_dict(record, "manifest").fixed_horizon is None
-    old_pwil = config_from_dict(read_run_config(tmp_path / "pwil-td3"), "config.json")
-    assert old_pwil.uses_fixed_horizon and old_pwil.agent_config(1000).time_augmentation
-    recorded = dataclasses.asdict(pwil.resolved(1000))
-    (tmp_path / "pwil-td3" / "config.json").write_text(json.dumps(recorded))
-    assert read_run_config(tmp_path / "pwil-td3")["fixed_horizon"] is False  # as recorded
-
-
-def test_a_run_given_as_settings_repeats_the_episodes_it_ran(tmp_path):
-    """`--config RUN/config.json` repeats an old PWIL-(s) run on the fixed horizon it ran; the
-    same settings in a file outside a run directory are a user's settings, whose None means
-    the algo's default (standard episodes). (A sweep sets the algo, so its runs take their
-    algo's episodes whatever its `config` file says.)"""
-    from ilfo.cli.train import config_from_args
-
-    record = {**dataclasses.asdict(TrainConfig(algo="pwil-td3")), "fixed_horizon": None}
-    run, loose = tmp_path / "run", tmp_path / "mine"
-    for folder in (run, loose):
-        folder.mkdir()
-        (folder / "config.json").write_text(json.dumps(record))
-    (run / "metrics.csv").write_text("step,episode\n")
-    repeat = config_from_args(str(run / "config.json"), {}, {})
-    assert repeat.uses_fixed_horizon
-    assert not config_from_args(
-        str(run / "config.json"), {"fixed_horizon": False}, {}
-    ).uses_fixed_horizon
-    assert not config_from_args(str(loose / "config.json"), {}, {}).uses_fixed_horizon
 
 
 def test_default_agent_and_rewarder_configs_are_the_presets():
@@ -236,7 +200,12 @@ def test_the_algo_names_are_the_registry():
     assert list(get_args(Algo)) == list(ALGOS)
     for name, recipe in ALGOS.items():
         config = TrainConfig(algo=name)
-        assert config.imitation == (recipe.reward is not None)
+        # An algo with a reward part imitates demos; one without refuses them, not ignores them.
+        if recipe.reward is None:
+            with pytest.raises(ValueError, match="learns from the task reward"):
+                TrainConfig(algo=name, demos="demos.npz")
+        else:
+            assert TrainConfig(algo=name, demos="demos.npz").demos == "demos.npz"
         resolved = config.resolved(100)
         used = {recipe.agent, recipe.reward} - {None}
         assert {part for part in PART_CONFIGS if getattr(resolved, part) is not None} == used

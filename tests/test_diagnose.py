@@ -39,6 +39,7 @@ def result(run):
     return diagnose_run(run, episodes=2)
 
 
+@pytest.mark.integration
 def test_the_command_writes_the_report_and_prints_a_summary(run, tmp_path, capsys):
     assert main(["diagnose", str(run), "--out", str(tmp_path / "report")]) == 0
     out = capsys.readouterr().out
@@ -57,6 +58,7 @@ def test_the_command_writes_the_report_and_prints_a_summary(run, tmp_path, capsy
     assert (run / "diagnosis" / REPORT_FILE).is_file()
 
 
+@pytest.mark.integration
 def test_shares_are_non_negative_and_sum_to_one(result):
     shares = result.diagnosis.shares
     assert shares.shape == (11,) and (shares >= 0).all()
@@ -67,6 +69,7 @@ def test_shares_are_non_negative_and_sum_to_one(result):
         assert e.column_costs.sum() == pytest.approx(e.distance, rel=1e-9)
 
 
+@pytest.mark.integration
 def test_the_proxy_rewards_are_the_ones_oops_gives_the_episode(run, result):
     config = result.config
     reward = make_reward(config, load_demo_set(config, 11).observations)  # as the run built it
@@ -114,6 +117,7 @@ def test_the_demo_against_itself_is_near_zero_and_noise_moves_it_away():
         diagnose_episodes([demo], [demo], names=["a", "b", "c"])
 
 
+@pytest.mark.integration
 def test_with_the_shipped_expert_s_demos_the_expert_calibration_is_in_the_report(
     run, tmp_path, capsys
 ):
@@ -139,6 +143,7 @@ def _error(args, capsys):
     return err
 
 
+@pytest.mark.integration
 def test_clear_errors(run, tmp_path, capsys):
     assert "is not a run directory (no config.json)" in _error([tmp_path], capsys)
     td3 = tmp_path / "td3"

@@ -113,6 +113,7 @@ def test_standard_mode_truncates_at_horizon():
         env.close()
 
 
+@pytest.mark.integration
 @pytest.mark.slow
 @pytest.mark.parametrize("env_id", BULLET_ENVS)
 def test_fixed_horizon_runs_1000_steps_ignoring_termination(env_id):
@@ -138,6 +139,7 @@ def test_fixed_horizon_ignores_termination_short():
         env.close()
 
 
+@pytest.mark.integration
 def test_import_leaves_no_gym_behind():
     pytest.importorskip("pybullet")
     code = (

@@ -49,6 +49,7 @@ def test_expert_reward_scales():
     assert expert_reward_scale("Hopper-v5") == 1.0
 
 
+@pytest.mark.integration
 def test_sac_resume_equals_uninterrupted(tiny_run, tmp_path):
     # Experts train in segments: a resumed SAC run (temperature, optimisers, replay, keys)
     # must give the numbers of one never interrupted.
@@ -58,6 +59,7 @@ def test_sac_resume_equals_uninterrupted(tiny_run, tmp_path):
     assert _metric_rows(run) == _metric_rows(tiny_run)
 
 
+@pytest.mark.integration
 def test_export_load_collect_and_card(tiny_run, tmp_path):
     out = export_expert(tiny_run, tmp_path / "Hopper-v5")
     expert = load_expert(out)
@@ -97,6 +99,7 @@ def test_export_load_collect_and_card(tiny_run, tmp_path):
     assert json.loads((out / "expert.json").read_text())["exported"]["policy"] == "best"
 
 
+@pytest.mark.integration
 def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     run = tmp_path / "run"
     base = ["expert", "train", "Hopper-v5", "--run-dir", str(run), "--no-progress"]
@@ -188,6 +191,7 @@ def test_expert_cli_train_resume_export_eval(tmp_path, capsys):
     assert "not Walker2d-v5" in capsys.readouterr().err
 
 
+@pytest.mark.integration
 def test_demos_where_the_expert_falls_are_skipped_and_recorded(tiny_run, tmp_path, monkeypatch):
     from ilfo.experts import ExpertPolicy
 
@@ -212,6 +216,7 @@ def test_demos_where_the_expert_falls_are_skipped_and_recorded(tiny_run, tmp_pat
         collect_demos(expert, 2, tmp_path / "late.npz", first_seed=999)  # 999 skipped, a fall
 
 
+@pytest.mark.integration
 def test_a_finish_is_kept_at_full_length_and_scored_as_the_evaluation(
     tiny_run, tmp_path, monkeypatch
 ):
@@ -241,6 +246,7 @@ def test_a_finish_is_kept_at_full_length_and_scored_as_the_evaluation(
     assert [e.task_score for e in kept] == [40.0, 40.0]
 
 
+@pytest.mark.integration
 def test_an_expert_without_contact_forces_records_demos_of_the_full_observation(tmp_path):
     # Ant's expert may learn without the contact forces (as on the paper's v2 Ant, where they
     # were all zero); its demos must still hold all 105 columns, and its actions must be those

@@ -13,6 +13,8 @@ from stable_baselines3.common.vec_env import DummyVecEnv  # noqa: E402
 
 from ilfo.integrations.sb3 import OTReplayBuffer  # noqa: E402
 
+pytestmark = pytest.mark.integration  # Stable-Baselines3 and torch: trains and relabels
+
 TASK_REWARD = 1e6  # would show anywhere it leaked
 
 

@@ -89,6 +89,7 @@ GAIFO = dict(algo="gaifo-td3", discriminator=SMALL_DISC, td3={"actor_hidden": (3
              "critic_hidden": (32, 32)})  # fmt: skip
 
 
+@pytest.mark.integration
 def test_gaifo_td3_trains_deterministically_and_resume_equals_uninterrupted(tmp_path):
     full = metrics_rows(train_tiny(tmp_path, "full", **GAIFO))
     assert full == metrics_rows(train_tiny(tmp_path, "again", **GAIFO))
@@ -104,6 +105,7 @@ def test_gaifo_td3_trains_deterministically_and_resume_equals_uninterrupted(tmp_
     assert metrics_rows(trainer.train()) == full
 
 
+@pytest.mark.integration
 def test_gaifo_td3_defaults_to_the_authors_td3_and_flags_reach_config_json(tmp_path, capsys):
     args = ["train", "--algo", "gaifo-td3", "--env", "Hopper-v5", "--demos", TINY_RUN["demos"]]
     args += ["--horizon", "50", "--steps", "100", "--start-steps", "100", "--eval-every", "100"]
@@ -146,6 +148,7 @@ FIRL_TINY = dict(
 )  # fmt: skip
 
 
+@pytest.mark.integration
 def test_firl_trains_deterministically_and_resume_equals_uninterrupted(tmp_path):
     full = metrics_rows(train_tiny(tmp_path, "full", **FIRL_TINY))
     assert full == metrics_rows(train_tiny(tmp_path, "again", **FIRL_TINY))
@@ -191,6 +194,7 @@ def test_expert_transitions_checks_its_demos_clearly():
         expert_transitions(np.zeros((0, 4, 3)))
 
 
+@pytest.mark.integration
 def test_learned_rewards_see_the_demos_up_to_the_horizon(tmp_path, monkeypatch):
     """With --horizon 100 below the demos' length, the discriminator's expert transitions and
     the agent's expert observations are each demo's first 100 (time features in [0, 1])."""

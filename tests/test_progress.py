@@ -26,6 +26,7 @@ class _Bar:
         pass
 
 
+@pytest.mark.integration
 def test_the_bar_moves_within_an_episode_and_ends_at_the_steps(tmp_path, monkeypatch):
     bars: list[_Bar] = []
 

@@ -18,6 +18,7 @@ import pytest
 from ilfo import demos
 from ilfo.cli import main
 from ilfo.training import TrainConfig, Trainer
+from ilfo.training.checkpoint import snapshot_run
 from ilfo.training.run_dir import (
     FAULT_ENV,
     RunDirInUse,
@@ -25,7 +26,6 @@ from ilfo.training.run_dir import (
     create_run_dir,
     latest_checkpoint,
     results_past_first_checkpoint,
-    snapshot_run,
 )
 from tiny_run import DEMOS, metrics_rows, train_tiny
 from tiny_run import TINY_RUN as TINY_RUN
@@ -71,6 +71,7 @@ def test_cli_runs_started_in_the_same_second_write_their_own_directories(tmp_pat
     assert json.loads((first / "config.json").read_text())["oops"]["reg"] == 0.05
 
 
+@pytest.mark.integration
 def test_a_run_refuses_a_directory_another_process_writes(tmp_path):
     run = train_tiny(tmp_path, "run", steps=200)
     before = (run / "config.json").read_bytes(), metrics_rows(run)
@@ -88,26 +89,27 @@ def test_a_run_refuses_a_directory_another_process_writes(tmp_path):
 
 
 # ----------------------------------------------------------------------------------- resume
+@pytest.mark.integration
 def test_resume_finds_the_newest_complete_checkpoint_and_removes_leftovers(tmp_path):
     full = metrics_rows(train_tiny(tmp_path, "full", steps=400))
     run = train_tiny(tmp_path, "run", steps=300, checkpoint_every=100)
     root = run / "checkpoints"
     assert [p.name for p in root.iterdir()] == ["step_000000300"]  # older ones removed
-    # What kills at other moments leave: a half-written checkpoint, a stale pointer of an older
-    # ilfo, an older checkpoint not yet removed, and an incomplete directory.
+    # What kills at other moments leave: a half-written checkpoint, an older checkpoint not yet
+    # removed, and an incomplete directory (an older ilfo's stale pointer: test_compat).
     (root / ".tmp_step_000000400").mkdir()
     (root / ".tmp_step_000000400" / "agent.msgpack").write_bytes(b"\x00" * 10)
-    (root / "latest").write_text("step_000000100")
     (root / "step_000000200").mkdir()  # an older one whose removal was cut short
     (root / "step_000000200" / "replay.npz").write_bytes(b"\x00" * 10)
     assert latest_checkpoint(run).name == "step_000000300"
     trainer = Trainer.resume(run, progress=False, steps=400)
     assert trainer.step == 300
-    assert not (root / ".tmp_step_000000400").exists() and not (root / "latest").exists()
+    assert not (root / ".tmp_step_000000400").exists()
     assert not (root / "step_000000200").exists()
     assert metrics_rows(trainer.train()) == full
 
 
+@pytest.mark.integration
 def test_a_newest_checkpoint_missing_files_is_refused_with_the_repair_not_skipped(tmp_path):
     """Checkpoints are renamed into place once written, so a newest one missing a file had it
     removed (replay.npz, to free disk): resuming from an older one or from step 0 would drop
@@ -143,6 +145,7 @@ def _killed() -> None:
     raise _Killed
 
 
+@pytest.mark.integration
 def test_a_run_killed_before_its_first_checkpoint_starts_again_from_zero(tmp_path):
     """Killed while writing its first checkpoint: its rows up to the one that checkpoint fell
     due at (step 200) and its best policy of that evaluation are what a start from step 0
@@ -165,6 +168,7 @@ def test_a_run_killed_before_its_first_checkpoint_starts_again_from_zero(tmp_pat
     assert metrics_rows(resumed.train()) == full
 
 
+@pytest.mark.integration
 def test_a_run_with_results_and_no_checkpoint_is_refused_and_keeps_them(tmp_path, capsys):
     """A finished run whose checkpoints were removed (to free the disk) has nothing to resume
     from: a start from step 0 would delete its metrics and policies, so resume refuses it,
@@ -239,6 +243,7 @@ def test_results_past_the_first_checkpoint_are_read_off_the_rows_policies_and_cl
     assert results_past_first_checkpoint(run, by_steps) == "best_policy.json"
 
 
+@pytest.mark.integration
 def test_checkpoints_follow_the_clock_as_well_as_the_steps(tmp_path, monkeypatch):
     saved = []
     original = Trainer.save_checkpoint
@@ -262,6 +267,7 @@ def test_checkpoints_follow_the_clock_as_well_as_the_steps(tmp_path, monkeypatch
             TrainConfig(**{**TINY_RUN, "checkpoint_minutes": bad})
 
 
+@pytest.mark.integration
 def test_resume_with_steps_writes_config_only_after_loading_and_refuses_to_shorten(tmp_path):
     run = train_tiny(tmp_path, "run", steps=300)
     config_bytes = (run / "config.json").read_bytes()
@@ -302,6 +308,7 @@ def uninterrupted(tmp_path_factory):
     return metrics_rows(train_tiny(tmp_path_factory.mktemp("reference"), "full"))
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(
     "fault",
     [
@@ -338,6 +345,7 @@ def _cli_error(capsys, argv, code=2):
     return err
 
 
+@pytest.mark.integration
 def test_damaged_run_files_are_clear_errors_that_name_the_file(tmp_path, capsys):
     run = train_tiny(tmp_path, "run", steps=200)
     config, policy = run / "config.json", run / "policy.msgpack"
@@ -384,6 +392,7 @@ def test_an_unwritable_out_is_one_line(tmp_path, capsys):
     assert str(blocker) in err
 
 
+@pytest.mark.integration
 def test_a_checkpoint_is_on_the_disk_before_its_rename_and_before_older_ones_go(
     tmp_path, monkeypatch
 ):
@@ -424,6 +433,7 @@ def test_a_checkpoint_is_on_the_disk_before_its_rename_and_before_older_ones_go(
     assert str(run / "metrics.csv") in synced_before
 
 
+@pytest.mark.integration
 def test_a_full_disk_during_a_checkpoint_is_one_line_and_keeps_what_was_written(
     tmp_path, capsys, monkeypatch
 ):
@@ -447,6 +457,7 @@ def test_a_full_disk_during_a_checkpoint_is_one_line_and_keeps_what_was_written(
     assert metrics_rows(Trainer.resume(run, progress=False).train()) == full
 
 
+@pytest.mark.integration
 def test_the_resume_hint_is_a_command_the_user_can_run(monkeypatch, tmp_path):
     import shutil
 
@@ -553,6 +564,7 @@ def test_sinkhorn_refuses_costs_beyond_float64_instead_of_returning_nan():
     assert np.isfinite(large.plan).all() and np.isfinite(large.cost)
 
 
+@pytest.mark.integration
 def test_a_snapshot_leaves_the_buffer_out_and_resumes_after_refilling_it(tmp_path, capsys):
     run = train_tiny(tmp_path, "run", steps=400)  # checkpoints at 200 and 400
     out = tmp_path / "carried"
@@ -585,11 +597,10 @@ def test_a_snapshot_leaves_the_buffer_out_and_resumes_after_refilling_it(tmp_pat
     again._lock.release()
 
 
+@pytest.mark.integration
 def test_a_snapshot_taken_mid_refill_keeps_refilling(tmp_path):
     run = train_tiny(tmp_path, "run", steps=400)
     out = tmp_path / "carried"
-    from ilfo.training.run_dir import snapshot_run
-
     with pytest.raises(ValueError, match="inside"):  # a copy into what it copies
         snapshot_run(run, run / "carried")
     snapshot_run(run, out)
@@ -604,11 +615,10 @@ def test_a_snapshot_taken_mid_refill_keeps_refilling(tmp_path):
     assert not rows[600]["critic_loss"] and rows[700]["critic_loss"]
 
 
+@pytest.mark.integration
 def test_an_on_policy_run_continues_exactly_from_a_snapshot(tmp_path):
     """Its buffer is the batch collected since its last update, part of its state: the
     snapshot keeps it (and a snapshot without it, from before, is refused clearly)."""
-    from ilfo.training.run_dir import snapshot_run
-
     sil = dict(algo="sil", trpo={"hidden": (16, 16), "batch_steps": 200, "value_iters": 5},
                sil={"critic_hidden": (16, 16), "critic_features": 8})  # fmt: skip
     full = train_tiny(tmp_path, "full", steps=500, **sil)

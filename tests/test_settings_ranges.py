@@ -20,12 +20,11 @@ from ilfo.agents.td7 import TD7Config
 from ilfo.algos import ALGOS
 from ilfo.cli import main
 from ilfo.labelling import LabelConfig
-from ilfo.paths import bundled_demos
 from ilfo.ranges import INT32_MAX, SettingError, declaration
 from ilfo.rewards import OOPSConfig
 from ilfo.training import TrainConfig, config_from_dict
+from tiny_run import DEMOS
 
-DEMOS = str(bundled_demos("Hopper-v5-scripted"))
 GUARDS = {  # small, so that a bad value that slipped through would not start a long run
     "--steps": "200",
     "--start-steps": "100",
@@ -229,14 +228,6 @@ def test_more_updates_than_the_agents_int32_counter_holds_are_refused_up_front()
     # (Not through `ilfo train`: without the check, that test would train for days.)
     with pytest.raises(ValueError, match="= 2,147,483,648 \\(--steps, --updates-per-step\\)"):
         config_from_dict({"steps": 2**30, "updates_per_step": 2}, "config.json")
-
-
-def test_a_task_reward_record_with_demos_reads_back_without_them():
-    """Records from before demos were refused for the task reward (they were ignored)."""
-    record = {**dataclasses.asdict(TrainConfig(algo="td3")), "demos": DEMOS}
-    assert config_from_dict(record, "config.json").demos is None
-    with pytest.raises(ValueError, match="do not apply to algo 'td3'"):
-        TrainConfig(**record)
 
 
 RESULTS = Path(__file__).parents[1] / "docs" / "results"

@@ -57,6 +57,7 @@ def _band(mean, std):
     return min(max(3 * std, 0.1 * abs(mean)), 0.25 * abs(mean))
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("directory", SHIPPED, ids=lambda p: p.name)
 def test_expert_still_scores_its_demos(directory):
     """The expert, replayed on its first two demos' seeds, starts as those demos did (the
@@ -75,6 +76,7 @@ def test_expert_still_scores_its_demos(directory):
         assert abs(replayed.task_score - demo.task_score) <= band, (seed, replayed.task_score)
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("directory", SHIPPED, ids=lambda p: p.name)
 def test_expert_still_scores_within_its_evaluation_band(directory):
     """On two seeds unlike the demos', the expert returns what its card's evaluation says."""

@@ -8,12 +8,14 @@ import numpy as np
 import pytest
 
 from ilfo.cli import main
-from ilfo.training import TrainConfig, Trainer, load_demos
+from ilfo.training import TrainConfig, Trainer, load_demos, read_run_config
 from ilfo.training.metrics import METRIC_FIELDS
+from ilfo.training.migrations import upgrade_run_config
 from ilfo.training.run_dir import latest_checkpoint
 from tiny_run import DEMOS, TINY_RUN, metrics_rows, train_tiny
 
 
+@pytest.mark.integration
 def test_smoke_run_writes_everything(tmp_path):
     run = train_tiny(tmp_path, "run")
     for name in ("config.json", "metrics.csv", "policy.msgpack", "learning_curve.png"):
@@ -27,6 +29,7 @@ def test_smoke_run_writes_everything(tmp_path):
     assert all(r["critic_loss"] for r in rows[2:])  # updates begin with the policy
 
 
+@pytest.mark.integration
 def test_same_seed_same_numbers_and_resume_equals_uninterrupted(tmp_path):
     full = metrics_rows(train_tiny(tmp_path, "full"))
     again = metrics_rows(train_tiny(tmp_path, "again"))
@@ -39,6 +42,7 @@ def test_same_seed_same_numbers_and_resume_equals_uninterrupted(tmp_path):
     assert other_seed != full
 
 
+@pytest.mark.integration
 def test_resume_with_oops_warm_starts_equals_uninterrupted(tmp_path):
     # Warm starts carry Sinkhorn potentials from episode to episode; a resume must restore them.
     warm = {"oops": {"warm_start": True, "tol": 1e-6}, "steps": 400}
@@ -48,6 +52,7 @@ def test_resume_with_oops_warm_starts_equals_uninterrupted(tmp_path):
     assert metrics_rows(Trainer.resume(run, progress=False, steps=400).train()) == full
 
 
+@pytest.mark.integration
 def test_resume_after_a_crash_drops_rows_logged_after_the_checkpoint(tmp_path):
     full = metrics_rows(train_tiny(tmp_path, "full", steps=400))
     run = train_tiny(tmp_path, "crashed", steps=300)
@@ -60,6 +65,7 @@ def test_resume_after_a_crash_drops_rows_logged_after_the_checkpoint(tmp_path):
     assert metrics_rows(trainer.train()) == full
 
 
+@pytest.mark.integration
 def test_eval_of_the_final_policy_repeats_the_last_evaluation(tmp_path):
     """`ilfo eval` rolls out on the run's evaluation seeds, not the demos' (0, 1, ...): a
     finished run's final policy scores what its last evaluation (at its last step) logged."""
@@ -73,6 +79,7 @@ def test_eval_of_the_final_policy_repeats_the_last_evaluation(tmp_path):
     assert round(result["ot_distance"], 5) == float(last["eval_ot_distance"])
 
 
+@pytest.mark.integration
 def test_a_run_past_its_budget_resumes_and_an_extended_one_drops_its_old_final_policy(tmp_path):
     """Whole 100-step episodes take a 250-step run to 300: resuming it is no shortening (it
     only writes its final policy again); extending it removes the 300-step final policy, which
@@ -97,6 +104,7 @@ def _replace(path, data):  # as the loop writes its files: a new file renamed ov
     tmp.replace(path)
 
 
+@pytest.mark.integration
 def test_resume_puts_back_the_checkpoints_best_policy(tmp_path):
     """A best policy written after the last checkpoint (by a later evaluation) is from a future
     the resume discards: the checkpoint's copy goes back, so that the best policy's record
@@ -128,6 +136,7 @@ def test_resume_puts_back_the_checkpoints_best_policy(tmp_path):
     assert {n: (young / n).read_bytes() for n in kept} == best
 
 
+@pytest.mark.integration
 def test_td7_same_seed_same_numbers_and_resume_equals_uninterrupted(tmp_path):
     # TD7's state (fixed and target encoders, the clipping range) must survive a checkpoint.
     td7 = {
@@ -149,6 +158,7 @@ def test_td7_same_seed_same_numbers_and_resume_equals_uninterrupted(tmp_path):
     )
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("algo", ["oops-ddpg", "oops-sac", "oops-td7", "pwil-td3", "td3", "td7"])
 def test_every_algo_runs(tmp_path, algo):
     rows = metrics_rows(train_tiny(tmp_path, algo, algo=algo, steps=300))
@@ -159,6 +169,7 @@ def test_every_algo_runs(tmp_path, algo):
         assert int(rows[0]["step"]) < 100 and not evals[-1]["eval_ot_distance"]
 
 
+@pytest.mark.integration
 def test_cli_train_and_eval_and_plot(tmp_path, capsys):
     args = ["train", "--no-progress", "--out", str(tmp_path), "--steps", "300"]
     for key, value in TINY_RUN.items():
@@ -194,6 +205,7 @@ def test_cli_train_and_eval_and_plot(tmp_path, capsys):
     assert "nothing to plot: no evaluation logged yet" in capsys.readouterr().err
 
 
+@pytest.mark.integration
 def test_imitation_on_ant_drops_the_contact_forces_by_default_from_the_run_and_its_demos(
     tmp_path,
 ):
@@ -233,11 +245,14 @@ def test_contact_forces_default_to_off_for_imitation_on_ant_and_humanoid_only():
         TrainConfig(env="Hopper-v5", contact_forces=False)
     # config.json records what the run observed, not None.
     assert TrainConfig(env="Ant-v5").resolved(1000).contact_forces is False
-    # A record written before the setting existed observed them; settings without it default.
-    assert config_from_dict({"env": "Ant-v5"}, "old config.json").contact_forces is True
+    # A record written before the setting existed observed them (migrations upgrades it when
+    # read: tests/test_compat.py); settings without it default.
+    old = config_from_dict(upgrade_run_config({"env": "Ant-v5"}, "old config.json"), "old")
+    assert old.contact_forces is True
     assert config_from_settings({"env": "Ant-v5"}, "spec").observes_contact_forces is False
 
 
+@pytest.mark.integration
 def test_a_reward_that_did_not_converge_is_reported_once(tmp_path):
     from ilfo.rewards import OOPSConfig
 
@@ -280,6 +295,7 @@ def test_demos_in_which_the_expert_fell_are_named_in_a_warning(tmp_path):
         load_demos(TrainConfig(**{**TINY_RUN, "demos": str(path), "num_demos": 3}))
 
 
+@pytest.mark.integration
 def test_a_run_records_the_demo_file_it_imitates_and_warns_if_it_changes(tmp_path):
     """demos.json ties a run to its demo file's bytes: a resume on a file replaced since (an
     expert re-exported) warns and keeps the first record; a run older than the record gets one
@@ -309,7 +325,9 @@ def test_a_run_records_the_demo_file_it_imitates_and_warns_if_it_changes(tmp_pat
         Trainer.resume(run, progress=False, steps=300)._lock.release()
     assert json.loads((run / "demos.json").read_text())["sha256"] == first_sha
 
-    (run / "demos.json").unlink()  # a run from before the record
+    (run / "demos.json").unlink()  # a run from before the record, and its format numbers
+    config = json.loads((run / "config.json").read_text())
+    (run / "config.json").write_text(json.dumps({k: v for k, v in config.items() if k != "format"}))
     Trainer.resume(run, progress=False, steps=300)._lock.release()
     record = json.loads((run / "demos.json").read_text())
     assert record["since_step"] == 200 and record["sha256"] != first_sha
@@ -373,6 +391,7 @@ def test_cli_errors(tmp_path, capsys):
     assert main(["eval", str(tmp_path)]) == 2
 
 
+@pytest.mark.integration
 def test_cli_agent_and_rewarder_flags_reach_config_json_and_resume(tmp_path, capsys):
     args = ["train", "--no-progress", "--out", str(tmp_path), "--steps", "300"]
     for key, value in TINY_RUN.items():
@@ -389,7 +408,7 @@ def test_cli_agent_and_rewarder_flags_reach_config_json_and_resume(tmp_path, cap
     assert td3["tau"] == 0.003 and td3["loss"] == "pal" and td3["max_time"] == 100
     assert oops["reg"] == 0.1 and oops["seed"] == 2 and oops["solver"] == "sinkhorn"
     assert saved["sac"] is None and saved["pwil"] is None
-    config = TrainConfig(**saved)
+    config = TrainConfig(**read_run_config(run))  # config.json's settings beside its format
     assert config.td3.critic_hidden == (64, 64) and config.oops.reg == 0.1
 
     assert main(["train", "--resume", str(run), "--steps", "400", "--no-progress"]) == 0
@@ -414,6 +433,7 @@ def test_cli_flags_of_another_algo_are_a_clear_error(capsys):
     assert "reg must be positive" in capsys.readouterr().err
 
 
+@pytest.mark.integration
 def test_ctrl_c_mid_episode_finishes_the_episode_checkpoints_and_resumes_exactly(tmp_path):
     import os
     import signal
@@ -460,6 +480,7 @@ def test_network_normalizer_weighs_expert_and_random_states_alike_as_the_paper_c
     np.testing.assert_allclose(alone, [0.33, 0.33, 1.0])
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("updates_per_step", [1, 3])
 def test_updates_per_step_sets_the_update_count(tmp_path, updates_per_step):
     config = TrainConfig(**{**TINY_RUN, "steps": 400, "updates_per_step": updates_per_step})
@@ -531,6 +552,7 @@ def test_numpy_integers_are_taken_as_ints():
     assert json.loads(json.dumps(dataclasses.asdict(config)))["seed"] == 3
 
 
+@pytest.mark.integration
 def test_a_relative_demos_path_is_recorded_absolute(tmp_path, monkeypatch, capsys):
     # Recorded as given, `ilfo eval RUN` and `--resume` from another directory could not find
     # the demos.
@@ -546,6 +568,7 @@ def test_a_relative_demos_path_is_recorded_absolute(tmp_path, monkeypatch, capsy
     assert json.loads(capsys.readouterr().out.splitlines()[-1])["episodes"] == 1
 
 
+@pytest.mark.integration
 def test_scores_are_not_normalised_by_a_negative_demo_return(tmp_path):
     # Pendulum's returns are negative: a learner at -1404 over a demo at -123 read 11.4.
     from ilfo import demos as demo_io

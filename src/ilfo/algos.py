@@ -125,13 +125,6 @@ class Recipe:
     ilfo's protocol (fixed-horizon for imitation, standard for the task reward); False:
     standard episodes, ending at a fall, where the algo's own code needs them (SIL, f-IRL,
     PWIL-(s))."""
-    fixed_horizon_when_unrecorded: bool | None = None
-    """The episodes its runs trained on when their config.json says ``fixed_horizon`` None:
-    such records predate config.json holding the resolved episodes (2026-12-05), so None meant
-    the algo's default of the time. Set where that default has changed since (PWIL-(s)'s was
-    the fixed horizon), so that old runs resume and report as they ran; None: the default
-    has not changed (or records of either kind exist, as for f-IRL's, and cannot be told
-    apart)."""
     start_steps: int | None = None
     """Uniformly random steps before the policy acts when a run does not say
     (``TrainConfig.start_steps``): None, ilfo's protocol (10,000, the OOPS paper's); a number
@@ -377,9 +370,9 @@ RECIPES: tuple[Recipe, ...] = (
         # PWIL's reward is always positive, so in its authors' code (standard episodes) a fall
         # that ends the episode forfeits the rest: staying up pays. With termination ignored
         # nothing does: Hopper 0.35 of the expert at 1M on the fixed horizon, 1.01 on standard
-        # episodes (docs/results.md).
+        # episodes (docs/results.md). Its runs before 2026-12-05 trained on the fixed horizon
+        # (``training.migrations`` reads their records so).
         fixed_horizon=False,
-        fixed_horizon_when_unrecorded=True,
     ),
     Recipe(
         "oops-adv-td3",

@@ -44,6 +44,7 @@ from ilfo.training import (
     score_policy,
 )
 from ilfo.training.config import check_eval_episodes
+from ilfo.training.migrations import config_record, upgrade_run_config
 
 POLICY_FILE, EXPERT_FILE, DEMOS_FILE, CARD_FILE = (
     "policy.msgpack",
@@ -145,7 +146,8 @@ def export_expert(
         run = load_run_policy(run_dir, "latest")
         ckpt = run.checkpoint
         assert ckpt is not None  # "latest" reads a checkpoint
-        chosen = {"policy": "latest", "step": ckpt.step, "elapsed": ckpt.elapsed, **ckpt.last_eval}
+        loop = ckpt.loop
+        chosen = {"policy": "latest", "step": loop.step, "elapsed": loop.elapsed, **loop.last_eval}
     config = run.config
     out = Path(out_dir) if out_dir else expert_dir(config.env)
     out.mkdir(parents=True, exist_ok=True)
@@ -155,7 +157,7 @@ def export_expert(
         policy_bytes = flax.serialization.to_bytes(run.policy)
     (out / POLICY_FILE).write_bytes(policy_bytes)
     record = {
-        "train_config": dataclasses.asdict(config),
+        "train_config": config_record(dataclasses.asdict(config)),
         "steps_trained": chosen["step"],
         "hours_trained": round(chosen["elapsed"] / 3600, 3),
         "horizon": run.env.horizon,
@@ -230,7 +232,7 @@ def load_expert(path: str | Path) -> ExpertPolicy:
         raw_config, horizon = dict(record["train_config"]), int(record["horizon"])
     except (ValueError, KeyError, TypeError) as err:
         raise ValueError(f"{record_path} is not a readable expert record ({err})") from None
-    config = config_from_dict(raw_config, record_path)
+    config = config_from_dict(upgrade_run_config(raw_config, record_path), record_path)
     env = make_env(config.env, True, horizon=horizon, contact_forces=config.observes_contact_forces)
     try:  # only its shapes are needed; a PyBullet env holds a physics client until closed
         agent = make_agent(config, env_info(env, config.env), demos=None)
@@ -352,7 +354,7 @@ def write_card(
     record = json.loads((directory / EXPERT_FILE).read_text())
     data = demo_io.load(directory / DEMOS_FILE)
     returns = np.array([e.task_score for e in data.episodes])
-    cfg = record["train_config"]
+    cfg = upgrade_run_config(record["train_config"], directory / EXPERT_FILE)
     card = {
         "env_id": cfg["env"],
         "algorithm": cfg["algo"],
@@ -364,8 +366,8 @@ def write_card(
         "trained_healthy_angle_range": cfg.get("healthy_angle_range"),
         # Ant-v5, Humanoid-v5: False for an expert that acts without the contact forces (ilfo
         # expert train --no-contact-forces); its demos still hold the full observation. None
-        # on envs without them. A record without the setting predates it: it observed them.
-        "observes_contact_forces": cfg.get("contact_forces") is not False
+        # on envs without them.
+        "observes_contact_forces": cfg["contact_forces"] is not False
         if cfg["env"] in CONTACT_FORCE_DIMS
         else None,
         "date": time.strftime("%Y-%m-%d"),

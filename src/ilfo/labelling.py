@@ -197,10 +197,32 @@ def label_dataset(
     ``contact_forces``: compare Ant-v5's and Humanoid-v5's states with their contact forces
     (None: as ilfo's imitation does, without). The dataset's and the demos' environments, where
     both are named, must be one task (versions may differ: D4RL's Hopper-v2 and Hopper-v5)."""
-    from ilfo import demos as demo_io
+    dataset, out = Path(dataset), Path(out)
+    fmt = _output_format(dataset, out)
+    data, episodes, expert_obs = _episodes_and_demos(
+        dataset, demos_file, num_demos, env_id, contact_forces
+    )
+    start = time.perf_counter()
+    rewards = label_episodes(
+        episodes,
+        expert_obs,
+        config,
+        workers=workers,
+        on_progress=on_progress,
+    )
+    seconds = time.perf_counter() - start
+    _write_new(fmt, dataset, out, data, rewards)
+    flat = np.concatenate(rewards)
+    return LabelSummary(
+        out, fmt, len(rewards), int(flat.size), seconds, float(flat.mean()), float(flat.std())
+    )
+
+
+def _output_format(dataset: Path, out: Path) -> str:
+    """The dataset's format, which its labelled copy is written in, or an error saying why
+    ``out`` cannot be written."""
     from ilfo.demos.readers import detect_format
 
-    dataset, out = Path(dataset), Path(out)
     if out.exists():
         raise FileExistsError(f"{out} exists: labelling writes a new file or directory")
     if not out.parent.is_dir():
@@ -210,6 +232,20 @@ def label_dataset(
         raise ValueError(f"{dataset}: labelling writes ilfo, Minari or D4RL files, not {fmt}")
     if fmt == "ilfo" and out.suffix != ".npz":
         raise ValueError(f"{out}: an ilfo dataset is written as a .npz file")
+    return fmt
+
+
+def _episodes_and_demos(
+    dataset: Path,
+    demos_file: str | Path,
+    num_demos: int | None,
+    env_id: str | None,
+    contact_forces: bool | None,
+) -> tuple[Any, list[np.ndarray], list[np.ndarray]]:
+    """The dataset as read, its episodes' observations and the demos', as OT compares them
+    (checked to be of one task and one width)."""
+    from ilfo import demos as demo_io
+
     data = demo_io.load_any(dataset, env_id=env_id)
     expert = demo_io.load_any(demos_file)
     if not expert.episodes:
@@ -236,15 +272,10 @@ def label_dataset(
         width = FULL_OBSERVATION_DIMS[env] - CONTACT_FORCE_DIMS[env]
         episodes = [match_observation_width(obs, env, width) for obs in episodes]
         expert_obs = [match_observation_width(obs, env, width) for obs in expert_obs]
-    start = time.perf_counter()
-    rewards = label_episodes(
-        episodes,
-        expert_obs,
-        config,
-        workers=workers,
-        on_progress=on_progress,
-    )
-    seconds = time.perf_counter() - start
+    return data, episodes, expert_obs
+
+
+def _write_new(fmt: str, dataset: Path, out: Path, data: Any, rewards: list[np.ndarray]) -> None:
     writers = {"ilfo": _write_ilfo, "minari": _write_minari, "d4rl": _write_d4rl}
     # Written beside ``out`` and moved into place: an error or a kill midway leaves no
     # half-labelled file under the labelled name (and the name free for a retry).
@@ -256,10 +287,6 @@ def label_dataset(
         if partial.is_dir():
             shutil.rmtree(partial)
         partial.unlink(missing_ok=True)
-    flat = np.concatenate(rewards)
-    return LabelSummary(
-        out, fmt, len(rewards), int(flat.size), seconds, float(flat.mean()), float(flat.std())
-    )
 
 
 def _task(env_id: str) -> str:

@@ -122,13 +122,14 @@ OPOLO = dict(
 )  # fmt: skip
 
 
+@pytest.mark.integration
 def test_opolo_trains_deterministically_and_resume_equals_uninterrupted(tmp_path):
     full = metrics_rows(train_tiny(tmp_path, "full", **OPOLO))
     assert full == metrics_rows(train_tiny(tmp_path, "again", **OPOLO))
     assert any(r["reward_loss"] for r in full) and any(r["critic_loss"] for r in full)
     run = train_tiny(tmp_path, "resumed", **{**OPOLO, "steps": 300})
     latest = load_run_policy(run, "latest")  # a checkpoint of the whole state reads back
-    assert latest.checkpoint is not None and latest.checkpoint.step == 300
+    assert latest.checkpoint is not None and latest.checkpoint.loop.step == 300
     trainer = Trainer.resume(run, progress=False, steps=600)
     assert metrics_rows(trainer.train()) == full
 

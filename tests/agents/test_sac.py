@@ -12,11 +12,6 @@ from ilfo.agents import SACConfig, make_sac
 from ilfo.networks import sample_squashed
 
 
-@pytest.fixture(scope="module")
-def buffer():
-    return random_buffer()
-
-
 def leaves_equal(a, b) -> bool:
     return all(
         np.array_equal(np.asarray(x), np.asarray(y))

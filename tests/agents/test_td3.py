@@ -29,11 +29,6 @@ def tree_equal(a, b) -> bool:
     )
 
 
-@pytest.fixture(scope="module")
-def buffer():
-    return random_buffer()
-
-
 # --- PAL loss -------------------------------------------------------------------------------
 
 
@@ -88,21 +83,28 @@ def test_other_critic_losses():
 # --- configs --------------------------------------------------------------------------------
 
 
-def test_presets():
-    p = TD3Config.paper()
-    assert p.actor_hidden == (256, 256) and p.critic_hidden == (1024, 1024)
-    assert (p.batch_size, p.tau, p.exploration_noise, p.target_noise) == (100, 0.003, 0.2, 0.1)
-    assert (p.noise_clip, p.policy_delay, p.lr_actor, p.lr_critic) == (0.5, 2, 3e-4, 3e-4)
-    assert (p.critic_grad_clip, p.loss, p.pal_alpha, p.pal_min_priority) == (25.0, "pal", 0.4, 1)
-    assert p.time_augmentation and p.gamma == 0.99 and p.num_critics == 2
-    f = TD3Config.fast()
-    assert f.critic_hidden == (256, 256)
-    assert dataclasses.replace(f, critic_hidden=(1024, 1024)) == p
-    d = ddpg_config()
-    assert (d.num_critics, d.target_noise, d.policy_delay) == (1, 0.0, 1)
-    assert d.critic_hidden == p.critic_hidden and d.loss == "pal"
+def test_fast_is_the_paper_preset_with_narrower_critics():
+    paper, fast = TD3Config.paper(), TD3Config.fast()
+    assert max(fast.critic_hidden) < max(paper.critic_hidden)
+    assert dataclasses.replace(fast, critic_hidden=paper.critic_hidden) == paper
+    assert TD3Config.fast(batch_size=32) == dataclasses.replace(fast, batch_size=32)
     with pytest.raises(dataclasses.FrozenInstanceError):
-        p.tau = 0.1  # type: ignore[misc]
+        paper.tau = 0.1  # type: ignore[misc]
+
+
+def test_ddpg_config_drops_td3s_three_ingredients_and_keeps_the_rest(buffer):
+    base = TD3Config.fast(**TINY)
+    ddpg = ddpg_config(base)
+    assert ddpg_config() == ddpg_config(TD3Config.paper())
+    kept = {f: getattr(base, f) for f in ("num_critics", "target_noise", "noise_clip")}
+    assert dataclasses.replace(ddpg, **kept, policy_delay=base.policy_delay) == base
+    assert ddpg.target_noise == 0.0  # no target policy smoothing
+    agent = make_td3(ddpg, OBS_DIM, ACT_DIM, MAX_ACTION)
+    s0 = agent.init(0)
+    obs, action = buffer.data.obs[:5], buffer.data.action[:5]
+    assert agent.q_values(s0, obs, action).shape[0] == 1  # one critic: no clipped double Q
+    s1, _ = agent.update(s0, buffer.data, buffer.size, num_updates=1)
+    assert not tree_equal(s1.actor_params, s0.actor_params)  # the actor learns every update
 
 
 # --- update mechanics -----------------------------------------------------------------------

@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax
 import numpy as np
 import pytest
-from agent_helpers import ACT_DIM, MAX_ACTION, OBS_DIM, random_buffer
+from agent_helpers import ACT_DIM, MAX_ACTION, OBS_DIM
 
 from ilfo.agents.critic_targets import pal_loss
 from ilfo.agents.td7 import (
@@ -26,11 +26,6 @@ SMALL = {
     "batch_size": 8,
     "time_augmentation": False,
 }
-
-
-@pytest.fixture
-def buffer():
-    return random_buffer()
 
 
 def tree_equal(a, b) -> bool:

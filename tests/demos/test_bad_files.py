@@ -229,10 +229,10 @@ def test_a_full_disk_names_the_metrics_file(tmp_path, monkeypatch):
 
 def test_a_full_disk_names_the_checkpoint_file(tmp_path, monkeypatch):
     from ilfo.replay import ReplayBuffer
-    from ilfo.training.checkpoint import Checkpoint, save_checkpoint
+    from ilfo.training.checkpoint import Checkpoint, LoopState, save_checkpoint
 
     buffer = ReplayBuffer(10, 3, 2)
-    ckpt = Checkpoint(5, 1, 1.0, {}, {}, {"w": np.zeros(2)}, buffer)
+    ckpt = Checkpoint(LoopState(step=5, episode=1, elapsed=1.0), {"w": np.zeros(2)}, buffer)
     monkeypatch.setattr(ReplayBuffer, "save", _disk_full)
     with pytest.raises(OSError) as info:
         save_checkpoint(tmp_path, ckpt)

@@ -165,6 +165,7 @@ def test_the_estimate_left_counts_checkpoints_and_kept_pairs(tmp_path):
     assert solvers.core_hours(tmp_path) == 0
 
 
+@pytest.mark.integration
 def test_table1_smoke_runs_into_a_report(tmp_path, capsys, monkeypatch):
     root = tmp_path / "t1"
     assert main(["reproduce", "table1", "--budget", "smoke", "--dir", str(root),
@@ -208,7 +209,7 @@ def test_table1_smoke_runs_into_a_report(tmp_path, capsys, monkeypatch):
     cached = json.loads((oops[0].run_dir / "distances.json").read_text())  # cached in the run
     assert cached["key"]["trained_step"] == oops[0].trained_step == oops[0].steps
     # A run's snapshot (sweeps carried between machines) keeps its measures.
-    from ilfo.training.run_dir import snapshot_run
+    from ilfo.training.checkpoint import snapshot_run
 
     carried = snapshot_run(oops[0].run_dir, tmp_path / "carried")
     for name in ("distances.json", "solvers.json"):
@@ -356,6 +357,7 @@ def test_pairs_of_other_rollouts_of_the_same_policy_are_measured_again(tmp_path,
     assert "2 pairs kept from before are of another final policy or other rollouts" in lines[1]
 
 
+@pytest.mark.integration
 def test_calibration_smoke_and_its_numbers(tmp_path):
     """The calibration's smoke budget: the expert, its noisy versions, zero and random actions;
     the expert's proxy return is the highest, the noisier the lower (measured: -172, -196,

@@ -454,6 +454,7 @@ def _sweep_cli(root, *extra):
     ]  # fmt: skip
 
 
+@pytest.mark.integration
 def test_killed_sweep_restarted_finishes_each_run_exactly_once(tmp_path):
     """A real local sweep of two tiny runs, SIGKILLed once a run has checkpointed: its workers
     checkpoint and stop with it, and the restarted sweep resumes them; every run ends with one
@@ -597,6 +598,7 @@ def test_cli_retries_alone_and_part_flags_over_a_spec_file(tmp_path, capsys):
     assert "holds another sweep" not in capsys.readouterr().err
 
 
+@pytest.mark.integration
 @pytest.mark.skipif(
     not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2,
     reason="needs two CPUs to choose between",

@@ -69,6 +69,7 @@ def _at_once(tmp_path: Path, setup: str, action: str, processes: int = 6) -> Non
 
 
 # ----------------------------------------------------------------- temporary files
+@pytest.mark.integration
 def test_processes_writing_one_json_file_at_once_use_temporaries_of_their_own(tmp_path):
     target = tmp_path / "shared.json"
     _at_once(
@@ -80,6 +81,7 @@ def test_processes_writing_one_json_file_at_once_use_temporaries_of_their_own(tm
     assert [p.name for p in tmp_path.iterdir() if p.name.endswith(".tmp")] == []
 
 
+@pytest.mark.integration
 def test_six_processes_creating_one_sweep_at_once(tmp_path):
     """Six processes create the same sweeps at once (each of 20 in turn): each one made once,
     every process handed it."""
@@ -140,6 +142,7 @@ def test_a_busy_workers_end_does_not_hide_the_live_worker_before_it(tmp_path, sl
     assert cpus_of_live_workers(sweep) == set()
 
 
+@pytest.mark.integration
 @TWO_CPUS
 def test_a_launched_worker_holds_its_cpus_before_it_records_its_start(tmp_path, monkeypatch):
     """A second `sweep run` process choosing CPUs while the first's worker is still loading

@@ -459,6 +459,19 @@ def td3_metrics(outs: tuple[jax.Array, ...]) -> dict[str, jax.Array]:
     }
 
 
+def _networks(cfg: TD3Config, action_dim: int, max_action: float) -> _Networks:
+    return _Networks(
+        actor=DeterministicActor(cfg.actor_hidden, action_dim, max_action, cfg.init_scheme),
+        critic=CriticEnsemble(
+            cfg.critic_hidden, cfg.num_critics, cfg.init_scheme, cfg.critic_layer_norm
+        ),
+        first_critic=CriticEnsemble(cfg.critic_hidden, 1, cfg.init_scheme, cfg.critic_layer_norm),
+        actor_opt=optax.adam(cfg.lr_actor),
+        critic_opt=make_optimizer(cfg.lr_critic, cfg.critic_grad_clip),
+        max_action=max_action,
+    )
+
+
 def make_td3(
     config: TD3Config, obs_dim: int, action_dim: int, max_action: float | ArrayLike = 1.0
 ) -> TD3:
@@ -475,16 +488,7 @@ def make_td3(
     max_action = as_float_bound(max_action)
     if cfg.time_augmentation and obs_dim < 2:
         raise ValueError("time augmentation needs observations with a trailing time feature")
-    nets = _Networks(
-        actor=DeterministicActor(cfg.actor_hidden, action_dim, max_action, cfg.init_scheme),
-        critic=CriticEnsemble(
-            cfg.critic_hidden, cfg.num_critics, cfg.init_scheme, cfg.critic_layer_norm
-        ),
-        first_critic=CriticEnsemble(cfg.critic_hidden, 1, cfg.init_scheme, cfg.critic_layer_norm),
-        actor_opt=optax.adam(cfg.lr_actor),
-        critic_opt=make_optimizer(cfg.lr_critic, cfg.critic_grad_clip),
-        max_action=max_action,
-    )
+    nets = _networks(cfg, action_dim, max_action)
 
     @jax.jit
     def act(state: TD3State | Policy, obs: jax.Array, key: jax.Array | None = None) -> jax.Array:

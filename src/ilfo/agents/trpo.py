@@ -46,6 +46,7 @@ Where ilfo departs from the SIL authors' TRPO:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
@@ -56,12 +57,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.optimize
-import scipy.signal
 from jax.flatten_util import ravel_pytree
 from numpy.typing import ArrayLike
 
 from ilfo.agents._common import Policy, as_float_bound, make_normalizer_setter
 from ilfo.agents.base import OnPolicyBatch
+from ilfo.agents.trust_region import (
+    LOG_2PI,
+    conjugate_gradients,
+    fisher_vector_product,
+    gae,
+    gaussian_kl,
+    gaussian_log_prob,
+)
 from ilfo.networks import dense
 from ilfo.ranges import between, check_fields, count, fraction, non_negative, positive, widths
 
@@ -81,9 +89,6 @@ __all__ = [
 ]
 
 Params = Any
-
-_CG_RESIDUAL_TOL = 1e-10  # Khrylx's conjugate gradients stop once r.r falls below this
-_LOG_2PI = math.log(2.0 * math.pi)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -229,115 +234,6 @@ class ValueMLP(nn.Module):
         return _SmallHeadMLP(self.hidden, 1, name="value")(obs)[..., 0]
 
 
-def gaussian_log_prob(mean: jax.Array, log_std: jax.Array, action: jax.Array) -> jax.Array:
-    """log N(action; mean, exp(log_std)^2) summed over the last axis: (..., d) -> (...)."""
-    z = (action - mean) * jnp.exp(-log_std)
-    return jnp.sum(-0.5 * z**2 - log_std - 0.5 * _LOG_2PI, axis=-1)
-
-
-def gaussian_kl(
-    mean0: jax.Array, log_std0: jax.Array, mean1: jax.Array, log_std1: jax.Array
-) -> jax.Array:
-    """KL(N(mean0, std0^2) || N(mean1, std1^2)) of diagonal Gaussians, summed over the last
-    axis: (..., d) -> (...)."""
-    var_ratio = jnp.exp(2.0 * (log_std0 - log_std1))
-    mahalanobis = ((mean0 - mean1) * jnp.exp(-log_std1)) ** 2
-    return jnp.sum(log_std1 - log_std0 + 0.5 * (var_ratio + mahalanobis) - 0.5, axis=-1)
-
-
-def fisher_vector_product(
-    policy: GaussianMLPPolicy,
-    params: Params,
-    obs_n: jax.Array,
-    damping: float,
-    code_fisher: bool = False,
-) -> Callable[[Params], Params]:
-    """v -> (F + damping I) v, F the Hessian at ``params`` of the mean over ``obs_n`` (N,
-    obs_dim; normalised) of KL(pi_params || pi). For this Gaussian policy F is the analytic
-    Fisher: (1/N) J^T diag(1/std^2) J on the mean network's parameters, 2 I on the log std and
-    0 across (Khrylx's ``use_fim``). ``code_fisher``: also 2 I on the mean network's parameters,
-    as the authors' code computes it (``TRPOConfig.code_fisher``). ``v`` is a pytree like
-    ``params``."""
-    mean_old, log_std_old = jax.lax.stop_gradient(policy.apply(params, obs_n))
-
-    def mean_kl(p: Params) -> jax.Array:
-        mean, log_std = policy.apply(p, obs_n)
-        return jnp.mean(gaussian_kl(mean_old, log_std_old, mean, log_std))
-
-    # linearize: the forward pass of grad(KL) is done once, and each product is its JVP.
-    _, hvp = jax.linearize(jax.grad(mean_kl), params)
-
-    def product(v: Params) -> Params:
-        out = jax.tree.map(lambda fv, x: fv + damping * x, hvp(v), v)
-        if code_fisher:
-            mean = jax.tree.map(
-                lambda fv, x: fv + 2.0 * x, out["params"]["mean"], v["params"]["mean"]
-            )
-            out = {"params": {**out["params"], "mean": mean}}
-        return out
-
-    return product
-
-
-def conjugate_gradients(
-    matvec: Callable[[jax.Array], jax.Array],
-    b: jax.Array,
-    iters: int,
-    residual_tol: float = _CG_RESIDUAL_TOL,
-) -> jax.Array:
-    """Solve A x = b for a symmetric positive definite A given as ``matvec``, from x0 = 0: at
-    most ``iters`` iterations, stopping once r.r < residual_tol (a ``lax.while_loop``)."""
-
-    def cond(carry: tuple) -> jax.Array:
-        i, _, _, _, rdotr = carry
-        return (i < iters) & (rdotr >= residual_tol)
-
-    def body(carry: tuple) -> tuple:
-        i, x, r, p, rdotr = carry
-        ap = matvec(p)
-        alpha = rdotr / jnp.dot(p, ap)
-        x = x + alpha * p
-        r = r - alpha * ap
-        new_rdotr = jnp.dot(r, r)
-        p = r + (new_rdotr / rdotr) * p
-        return i + 1, x, r, p, new_rdotr
-
-    init = (jnp.array(0), jnp.zeros_like(b), b, b, jnp.dot(b, b))
-    return jax.lax.while_loop(cond, body, init)[1]
-
-
-def gae(
-    rewards: ArrayLike, values: ArrayLike, episode_end: ArrayLike, gamma: float, lam: float
-) -> np.ndarray:
-    """Generalised advantage estimates (N,), float64, of concatenated episodes.
-
-    delta_t = r_t + gamma * V_{t+1} * (1 - end_t) - V_t and A_t = delta_t + gamma * lam *
-    (1 - end_t) * A_{t+1}: nothing flows across an episode end, so the last step of an episode
-    (time limits included, as SIL's code) is not bootstrapped. The last step of the batch must
-    be an episode end.
-    """
-    rewards = np.asarray(rewards, np.float64)
-    values = np.asarray(values, np.float64)
-    end = np.asarray(episode_end, bool)
-    if not rewards.shape == values.shape == end.shape or rewards.ndim != 1 or not rewards.size:
-        raise ValueError(
-            "rewards, values and episode_end must be non-empty 1-D arrays of one length"
-        )
-    if not end[-1]:
-        raise ValueError("the batch must end on an episode end")
-    # Within an episode A is a discounted reverse cumulative sum of the deltas (factor gamma *
-    # lam): a linear filter per episode, run backwards.
-    next_values = np.append(values[1:], 0.0) * ~end
-    deltas = rewards + gamma * next_values - values
-    advantages = np.empty_like(deltas)
-    starts = np.concatenate([[0], np.flatnonzero(end)[:-1] + 1])
-    stops = np.flatnonzero(end) + 1
-    for start, stop in zip(starts, stops, strict=True):
-        segment = deltas[start:stop][::-1]
-        advantages[start:stop] = scipy.signal.lfilter([1.0], [1.0, -gamma * lam], segment)[::-1]
-    return advantages
-
-
 def _check_batch(batch: OnPolicyBatch, obs_dim: int, action_dim: int) -> tuple[np.ndarray, ...]:
     """The batch as numpy (float32 obs and actions, float64 rewards, bool ends), or a
     ValueError saying what is wrong with it."""
@@ -369,6 +265,260 @@ def _check_batch(batch: OnPolicyBatch, obs_dim: int, action_dim: int) -> tuple[n
     return obs.astype(np.float32), action.astype(np.float32), reward.astype(np.float64), end
 
 
+class _Networks(NamedTuple):
+    """TRPO's networks and the flat views of their parameters that the host side works on."""
+
+    policy: GaussianMLPPolicy
+    value: ValueMLP
+    actor_from_flat: Callable[[jax.Array], Params]
+    value_from_flat: Callable[[jax.Array], Params]
+    template: jax.Array
+    """(1, obs_dim) zeros: what ``init`` traces the networks with."""
+
+
+def _networks(cfg: TRPOConfig, obs_dim: int, action_dim: int) -> _Networks:
+    policy = GaussianMLPPolicy(cfg.hidden, action_dim, cfg.log_std_init)
+    value = ValueMLP(cfg.hidden)
+    # Only the structure of these parameters is used (eval_shape: nothing is computed).
+    template = jnp.zeros((1, obs_dim), jnp.float32)
+    shapes = [jax.eval_shape(net.init, jax.random.PRNGKey(0), template) for net in (policy, value)]
+    actor_from_flat, value_from_flat = (
+        ravel_pytree(jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), s))[1] for s in shapes
+    )
+    return _Networks(policy, value, actor_from_flat, value_from_flat, template)
+
+
+def _init(nets: _Networks, obs_dim: int, seed: int) -> TRPOState:
+    k_policy, k_value = jax.random.split(jax.random.PRNGKey(seed))
+    return TRPOState(
+        actor_params=nets.policy.init(k_policy, nets.template),
+        value_params=nets.value.init(k_value, nets.template),
+        obs_mean=jnp.zeros(obs_dim, jnp.float32),
+        obs_std=jnp.ones(obs_dim, jnp.float32),
+        normalizer_set=jnp.array(False),
+        iterations=jnp.array(0, jnp.int32),
+    )
+
+
+def _normalize(cfg: TRPOConfig, state: TRPOState | Policy, obs: jax.Array) -> jax.Array:
+    obs_n = (obs - state.obs_mean) / state.obs_std
+    return jnp.clip(obs_n, -cfg.obs_clip, cfg.obs_clip)
+
+
+def _act(
+    nets: _Networks,
+    cfg: TRPOConfig,
+    state: TRPOState | Policy,
+    obs: jax.Array,
+    key: jax.Array | None = None,
+) -> jax.Array:
+    mean, log_std = nets.policy.apply(state.actor_params, _normalize(cfg, state, obs))
+    if key is None:
+        return mean
+    return mean + jnp.exp(log_std) * jax.random.normal(key, mean.shape, mean.dtype)
+
+
+def _log_prob(
+    nets: _Networks, cfg: TRPOConfig, state: TRPOState | Policy, obs: jax.Array, action: jax.Array
+) -> jax.Array:
+    mean, log_std = nets.policy.apply(state.actor_params, _normalize(cfg, state, obs))
+    return gaussian_log_prob(mean, log_std, action)
+
+
+def _value_of(nets: _Networks, cfg: TRPOConfig, state: TRPOState, obs: jax.Array) -> jax.Array:
+    return nets.value.apply(state.value_params, _normalize(cfg, state, obs))
+
+
+def _normalized_values(
+    nets: _Networks, cfg: TRPOConfig, state: TRPOState, obs: jax.Array
+) -> tuple[jax.Array, jax.Array]:
+    obs_n = _normalize(cfg, state, obs)
+    return obs_n, nets.value.apply(state.value_params, obs_n)
+
+
+def _value_objective(
+    nets: _Networks, cfg: TRPOConfig, flat: jax.Array, obs_n: jax.Array, target: jax.Array
+) -> tuple[jax.Array, jax.Array]:
+    """The value fit's loss and its gradient at the flat value parameters ``flat``."""
+
+    def loss(f: jax.Array) -> jax.Array:
+        v = nets.value.apply(nets.value_from_flat(f), obs_n)
+        return jnp.mean((v - target) ** 2) + cfg.value_l2 * jnp.sum(f**2)
+
+    return jax.value_and_grad(loss)(flat)
+
+
+def _value_mse(nets: _Networks, flat: jax.Array, obs_n: jax.Array, target: jax.Array) -> jax.Array:
+    return jnp.mean((nets.value.apply(nets.value_from_flat(flat), obs_n) - target) ** 2)
+
+
+def _policy_direction(
+    nets: _Networks,
+    cfg: TRPOConfig,
+    actor_params: Params,
+    obs_n: jax.Array,
+    action: jax.Array,
+    adv: jax.Array,
+) -> tuple[jax.Array, ...]:
+    """The old policy's log densities and outputs, the surrogate's gradient g, the CG
+    direction s ~ -(F + damping)^-1 g, and s^T (F + damping) s."""
+    policy, actor_from_flat = nets.policy, nets.actor_from_flat
+    mean_old, log_std_old = policy.apply(actor_params, obs_n)
+    logp_old = gaussian_log_prob(mean_old, log_std_old, action)
+    flat0 = ravel_pytree(actor_params)[0]
+
+    def surrogate(flat: jax.Array) -> jax.Array:
+        mean, log_std = policy.apply(actor_from_flat(flat), obs_n)
+        ratio = jnp.exp(gaussian_log_prob(mean, log_std, action) - logp_old)
+        return jnp.mean(-adv * ratio)
+
+    grad = jax.grad(surrogate)(flat0)
+    fvp = fisher_vector_product(policy, actor_params, obs_n, cfg.damping, cfg.code_fisher)
+
+    def fvp_flat(v: jax.Array) -> jax.Array:
+        return ravel_pytree(fvp(actor_from_flat(v)))[0]
+
+    step = conjugate_gradients(fvp_flat, -grad, cfg.cg_iters)
+    s_f_s = jnp.dot(step, fvp_flat(step))
+    return grad, step, s_f_s, logp_old, mean_old, log_std_old
+
+
+def _evaluate(
+    nets: _Networks,
+    flat: jax.Array,
+    obs_n: jax.Array,
+    action: jax.Array,
+    adv: jax.Array,
+    logp_old: jax.Array,
+    mean_old: jax.Array,
+    log_std_old: jax.Array,
+) -> tuple[jax.Array, jax.Array]:
+    """(surrogate, mean KL(old || new)) of the flat policy parameters ``flat``."""
+    mean, log_std = nets.policy.apply(nets.actor_from_flat(flat), obs_n)
+    ratio = jnp.exp(gaussian_log_prob(mean, log_std, action) - logp_old)
+    kl = jnp.mean(gaussian_kl(mean_old, log_std_old, mean, log_std))
+    return jnp.mean(-adv * ratio), kl
+
+
+class _Jitted(NamedTuple):
+    """The jitted pieces the host side of ``learn`` calls (eagerly, each small operation would
+    compile on its own)."""
+
+    ravel: Callable[[Params], jax.Array]
+    unravel_actor: Callable[[jax.Array], Params]
+    unravel_value: Callable[[jax.Array], Params]
+    normalized_values: Callable[..., tuple[jax.Array, jax.Array]]
+    value_objective: Callable[..., tuple[jax.Array, jax.Array]]
+    value_mse: Callable[..., jax.Array]
+    policy_direction: Callable[..., tuple[jax.Array, ...]]
+    evaluate: Callable[..., tuple[jax.Array, jax.Array]]
+
+
+def _jitted(nets: _Networks, cfg: TRPOConfig) -> _Jitted:
+    return _Jitted(
+        ravel=jax.jit(lambda params: ravel_pytree(params)[0]),
+        unravel_actor=jax.jit(nets.actor_from_flat),
+        unravel_value=jax.jit(nets.value_from_flat),
+        normalized_values=jax.jit(functools.partial(_normalized_values, nets, cfg)),
+        value_objective=jax.jit(functools.partial(_value_objective, nets, cfg)),
+        value_mse=jax.jit(functools.partial(_value_mse, nets)),
+        policy_direction=jax.jit(functools.partial(_policy_direction, nets, cfg)),
+        evaluate=jax.jit(functools.partial(_evaluate, nets)),
+    )
+
+
+def _fit_value(
+    fns: _Jitted, cfg: TRPOConfig, state: TRPOState, obs_n: jax.Array, target: jax.Array
+) -> tuple[Params, float]:
+    """Full-batch L-BFGS-B from the current parameters, as SIL's code (scipy's defaults
+    otherwise); scipy works in float64 on float32 losses and gradients."""
+
+    def objective(x: np.ndarray) -> tuple[float, np.ndarray]:
+        loss, grad = fns.value_objective(jnp.asarray(x.astype(np.float32)), obs_n, target)
+        return float(loss), np.asarray(grad, np.float64)
+
+    x0 = np.asarray(fns.ravel(state.value_params), np.float64)
+    result = scipy.optimize.minimize(
+        objective, x0, jac=True, method="L-BFGS-B", options={"maxiter": cfg.value_iters}
+    )
+    flat = jnp.asarray(result.x.astype(np.float32))
+    return fns.unravel_value(flat), float(fns.value_mse(flat, obs_n, target))
+
+
+def _line_search(
+    fns: _Jitted,
+    cfg: TRPOConfig,
+    state: TRPOState,
+    obs_n: jax.Array,
+    action: jax.Array,
+    adv: jax.Array,
+) -> tuple[Params, tuple[float, float, float]]:
+    """The policy step: the new actor parameters and (fraction, surrogate improvement, KL)
+    of the accepted step, or the old parameters and zeros when no step is accepted."""
+    grad, step, s_f_s, *old = fns.policy_direction(state.actor_params, obs_n, action, adv)
+    grad, step, s_f_s = np.asarray(grad), np.asarray(step), float(s_f_s)
+    flat0 = np.asarray(fns.ravel(state.actor_params))
+    surrogate_old = float(fns.evaluate(flat0, obs_n, action, adv, *old)[0])
+    if not (math.isfinite(s_f_s) and s_f_s > 0):
+        return state.actor_params, (0.0, 0.0, 0.0)
+    # Scaled so that the quadratic model of the KL, 0.5 s^T F s, equals max_kl.
+    full_step = step * np.float32(math.sqrt(cfg.max_kl / (0.5 * s_f_s)))
+    expected_full = -float(np.dot(grad.astype(np.float64), full_step))
+    if not (math.isfinite(expected_full) and expected_full > 0):
+        return state.actor_params, (0.0, 0.0, 0.0)
+    for k in range(cfg.line_search_steps):
+        fraction = 0.5**k
+        candidate = flat0 + np.float32(fraction) * full_step
+        surrogate_new, kl = map(float, fns.evaluate(candidate, obs_n, action, adv, *old))
+        improvement = surrogate_old - surrogate_new
+        if improvement / (expected_full * fraction) > cfg.accept_ratio and (
+            not cfg.kl_check or kl <= cfg.max_kl
+        ):
+            return fns.unravel_actor(jnp.asarray(candidate)), (fraction, improvement, kl)
+    return state.actor_params, (0.0, 0.0, 0.0)
+
+
+def _learn(
+    fns: _Jitted,
+    cfg: TRPOConfig,
+    obs_dim: int,
+    action_dim: int,
+    state: TRPOState,
+    batch: OnPolicyBatch,
+) -> tuple[TRPOState, dict[str, float]]:
+    """One TRPO iteration on ``batch`` (whole episodes of the current policy): value fit,
+    then the policy step. Deterministic."""
+    obs, action, reward, end = _check_batch(batch, obs_dim, action_dim)
+    obs_n, v_old = fns.normalized_values(state, jnp.asarray(obs))
+    v_old = np.asarray(v_old, np.float64)
+    advantages = gae(reward, v_old, end, cfg.gamma, cfg.gae_lambda)
+    target = jnp.asarray((v_old + advantages).astype(np.float32))
+    spread = advantages.std(ddof=1)
+    # All-equal advantages carry no direction: 0 (then no step) rather than 0/0.
+    adv_n = (advantages - advantages.mean()) / (spread if spread > 0 else 1.0)
+
+    value_params, value_loss = _fit_value(fns, cfg, state, obs_n, target)
+    actor_params, (fraction, improvement, kl) = _line_search(
+        fns, cfg, state, obs_n, jnp.asarray(action), jnp.asarray(adv_n.astype(np.float32))
+    )
+
+    new_state = state.replace(
+        actor_params=actor_params,
+        value_params=value_params,
+        iterations=jnp.asarray(int(state.iterations) + 1, jnp.int32),
+    )
+    log_std = np.asarray(actor_params["params"]["log_std"], np.float64)
+    metrics = {
+        "value_loss": value_loss,
+        "surrogate_improvement": improvement,
+        "kl": kl,
+        "step_fraction": fraction,
+        "entropy": float(np.sum(log_std + 0.5 * (1.0 + LOG_2PI))),
+        "mean_std": float(np.mean(np.exp(log_std))),
+    }
+    return new_state, metrics
+
+
 def make_trpo(
     config: TRPOConfig, obs_dim: int, action_dim: int, max_action: float | ArrayLike = 1.0
 ) -> TRPO:
@@ -384,197 +534,17 @@ def make_trpo(
     cfg = config
     if obs_dim < 1 or action_dim < 1:
         raise ValueError(f"obs_dim and action_dim must be positive, got {obs_dim}, {action_dim}")
-    max_action = as_float_bound(max_action)
-    policy = GaussianMLPPolicy(cfg.hidden, action_dim, cfg.log_std_init)
-    value = ValueMLP(cfg.hidden)
-    # Only the structure of these parameters is used (eval_shape: nothing is computed).
-    template = jnp.zeros((1, obs_dim), jnp.float32)
-    shapes = [jax.eval_shape(net.init, jax.random.PRNGKey(0), template) for net in (policy, value)]
-    actor_from_flat, value_from_flat = (
-        ravel_pytree(jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), s))[1] for s in shapes
-    )
-    # Jitted copies for the host side: eagerly, each small operation would compile on its own.
-    ravel = jax.jit(lambda params: ravel_pytree(params)[0])
-    unravel_actor = jax.jit(actor_from_flat)
-    unravel_value = jax.jit(value_from_flat)
-
-    @jax.jit
-    def init(seed: int) -> TRPOState:
-        k_policy, k_value = jax.random.split(jax.random.PRNGKey(seed))
-        return TRPOState(
-            actor_params=policy.init(k_policy, template),
-            value_params=value.init(k_value, template),
-            obs_mean=jnp.zeros(obs_dim, jnp.float32),
-            obs_std=jnp.ones(obs_dim, jnp.float32),
-            normalizer_set=jnp.array(False),
-            iterations=jnp.array(0, jnp.int32),
-        )
-
-    def normalize(state: TRPOState | Policy, obs: jax.Array) -> jax.Array:
-        obs_n = (obs - state.obs_mean) / state.obs_std
-        return jnp.clip(obs_n, -cfg.obs_clip, cfg.obs_clip)
-
-    @jax.jit
-    def act(state: TRPOState | Policy, obs: jax.Array, key: jax.Array | None = None) -> jax.Array:
-        mean, log_std = policy.apply(state.actor_params, normalize(state, obs))
-        if key is None:
-            return mean
-        return mean + jnp.exp(log_std) * jax.random.normal(key, mean.shape, mean.dtype)
-
-    @jax.jit
-    def log_prob(state: TRPOState | Policy, obs: jax.Array, action: jax.Array) -> jax.Array:
-        mean, log_std = policy.apply(state.actor_params, normalize(state, obs))
-        return gaussian_log_prob(mean, log_std, action)
-
-    @jax.jit
-    def value_of(state: TRPOState, obs: jax.Array) -> jax.Array:
-        return value.apply(state.value_params, normalize(state, obs))
-
-    @jax.jit
-    def normalized_values(state: TRPOState, obs: jax.Array) -> tuple[jax.Array, jax.Array]:
-        obs_n = normalize(state, obs)
-        return obs_n, value.apply(state.value_params, obs_n)
-
-    @jax.jit
-    def value_objective(
-        flat: jax.Array, obs_n: jax.Array, target: jax.Array
-    ) -> tuple[jax.Array, jax.Array]:
-        def loss(f: jax.Array) -> jax.Array:
-            v = value.apply(value_from_flat(f), obs_n)
-            return jnp.mean((v - target) ** 2) + cfg.value_l2 * jnp.sum(f**2)
-
-        return jax.value_and_grad(loss)(flat)
-
-    @jax.jit
-    def value_mse(flat: jax.Array, obs_n: jax.Array, target: jax.Array) -> jax.Array:
-        return jnp.mean((value.apply(value_from_flat(flat), obs_n) - target) ** 2)
-
-    @jax.jit
-    def policy_direction(
-        actor_params: Params, obs_n: jax.Array, action: jax.Array, adv: jax.Array
-    ) -> tuple[jax.Array, ...]:
-        """The old policy's log densities and outputs, the surrogate's gradient g, the CG
-        direction s ~ -(F + damping)^-1 g, and s^T (F + damping) s."""
-        mean_old, log_std_old = policy.apply(actor_params, obs_n)
-        logp_old = gaussian_log_prob(mean_old, log_std_old, action)
-        flat0 = ravel_pytree(actor_params)[0]
-
-        def surrogate(flat: jax.Array) -> jax.Array:
-            mean, log_std = policy.apply(actor_from_flat(flat), obs_n)
-            ratio = jnp.exp(gaussian_log_prob(mean, log_std, action) - logp_old)
-            return jnp.mean(-adv * ratio)
-
-        grad = jax.grad(surrogate)(flat0)
-        fvp = fisher_vector_product(policy, actor_params, obs_n, cfg.damping, cfg.code_fisher)
-
-        def fvp_flat(v: jax.Array) -> jax.Array:
-            return ravel_pytree(fvp(actor_from_flat(v)))[0]
-
-        step = conjugate_gradients(fvp_flat, -grad, cfg.cg_iters)
-        s_f_s = jnp.dot(step, fvp_flat(step))
-        return grad, step, s_f_s, logp_old, mean_old, log_std_old
-
-    @jax.jit
-    def evaluate(
-        flat: jax.Array,
-        obs_n: jax.Array,
-        action: jax.Array,
-        adv: jax.Array,
-        logp_old: jax.Array,
-        mean_old: jax.Array,
-        log_std_old: jax.Array,
-    ) -> tuple[jax.Array, jax.Array]:
-        """(surrogate, mean KL(old || new)) of the flat policy parameters ``flat``."""
-        mean, log_std = policy.apply(actor_from_flat(flat), obs_n)
-        ratio = jnp.exp(gaussian_log_prob(mean, log_std, action) - logp_old)
-        kl = jnp.mean(gaussian_kl(mean_old, log_std_old, mean, log_std))
-        return jnp.mean(-adv * ratio), kl
-
-    def fit_value(state: TRPOState, obs_n: jax.Array, target: jax.Array) -> tuple[Params, float]:
-        """Full-batch L-BFGS-B from the current parameters, as SIL's code (scipy's defaults
-        otherwise); scipy works in float64 on float32 losses and gradients."""
-
-        def objective(x: np.ndarray) -> tuple[float, np.ndarray]:
-            loss, grad = value_objective(jnp.asarray(x.astype(np.float32)), obs_n, target)
-            return float(loss), np.asarray(grad, np.float64)
-
-        x0 = np.asarray(ravel(state.value_params), np.float64)
-        result = scipy.optimize.minimize(
-            objective, x0, jac=True, method="L-BFGS-B", options={"maxiter": cfg.value_iters}
-        )
-        flat = jnp.asarray(result.x.astype(np.float32))
-        return unravel_value(flat), float(value_mse(flat, obs_n, target))
-
-    def line_search(
-        state: TRPOState, obs_n: jax.Array, action: jax.Array, adv: jax.Array
-    ) -> tuple[Params, tuple[float, float, float]]:
-        """The policy step: the new actor parameters and (fraction, surrogate improvement, KL)
-        of the accepted step, or the old parameters and zeros when no step is accepted."""
-        grad, step, s_f_s, *old = policy_direction(state.actor_params, obs_n, action, adv)
-        grad, step, s_f_s = np.asarray(grad), np.asarray(step), float(s_f_s)
-        flat0 = np.asarray(ravel(state.actor_params))
-        surrogate_old = float(evaluate(flat0, obs_n, action, adv, *old)[0])
-        if not (math.isfinite(s_f_s) and s_f_s > 0):
-            return state.actor_params, (0.0, 0.0, 0.0)
-        # Scaled so that the quadratic model of the KL, 0.5 s^T F s, equals max_kl.
-        full_step = step * np.float32(math.sqrt(cfg.max_kl / (0.5 * s_f_s)))
-        expected_full = -float(np.dot(grad.astype(np.float64), full_step))
-        if not (math.isfinite(expected_full) and expected_full > 0):
-            return state.actor_params, (0.0, 0.0, 0.0)
-        for k in range(cfg.line_search_steps):
-            fraction = 0.5**k
-            candidate = flat0 + np.float32(fraction) * full_step
-            surrogate_new, kl = map(float, evaluate(candidate, obs_n, action, adv, *old))
-            improvement = surrogate_old - surrogate_new
-            if improvement / (expected_full * fraction) > cfg.accept_ratio and (
-                not cfg.kl_check or kl <= cfg.max_kl
-            ):
-                return unravel_actor(jnp.asarray(candidate)), (fraction, improvement, kl)
-        return state.actor_params, (0.0, 0.0, 0.0)
-
-    def learn(state: TRPOState, batch: OnPolicyBatch) -> tuple[TRPOState, dict[str, float]]:
-        """One TRPO iteration on ``batch`` (whole episodes of the current policy): value fit,
-        then the policy step. Deterministic."""
-        obs, action, reward, end = _check_batch(batch, obs_dim, action_dim)
-        obs_n, v_old = normalized_values(state, jnp.asarray(obs))
-        v_old = np.asarray(v_old, np.float64)
-        advantages = gae(reward, v_old, end, cfg.gamma, cfg.gae_lambda)
-        target = jnp.asarray((v_old + advantages).astype(np.float32))
-        spread = advantages.std(ddof=1)
-        # All-equal advantages carry no direction: 0 (then no step) rather than 0/0.
-        adv_n = (advantages - advantages.mean()) / (spread if spread > 0 else 1.0)
-
-        value_params, value_loss = fit_value(state, obs_n, target)
-        actor_params, (fraction, improvement, kl) = line_search(
-            state, obs_n, jnp.asarray(action), jnp.asarray(adv_n.astype(np.float32))
-        )
-
-        new_state = state.replace(
-            actor_params=actor_params,
-            value_params=value_params,
-            iterations=jnp.asarray(int(state.iterations) + 1, jnp.int32),
-        )
-        log_std = np.asarray(actor_params["params"]["log_std"], np.float64)
-        metrics = {
-            "value_loss": value_loss,
-            "surrogate_improvement": improvement,
-            "kl": kl,
-            "step_fraction": fraction,
-            "entropy": float(np.sum(log_std + 0.5 * (1.0 + _LOG_2PI))),
-            "mean_std": float(np.mean(np.exp(log_std))),
-        }
-        return new_state, metrics
-
+    nets = _networks(cfg, obs_dim, action_dim)
     return TRPO(
         config=cfg,
         obs_dim=obs_dim,
         action_dim=action_dim,
-        max_action=max_action,
+        max_action=as_float_bound(max_action),
         batch_steps=cfg.batch_steps,
-        init=init,
-        act=act,
+        init=jax.jit(functools.partial(_init, nets, obs_dim)),
+        act=jax.jit(functools.partial(_act, nets, cfg)),
         set_normalizer=make_normalizer_setter(obs_dim, time_feature=False),
-        learn=learn,
-        log_prob=log_prob,
-        value=value_of,
+        learn=functools.partial(_learn, _jitted(nets, cfg), cfg, obs_dim, action_dim),
+        log_prob=jax.jit(functools.partial(_log_prob, nets, cfg)),
+        value=jax.jit(functools.partial(_value_of, nets, cfg)),
     )

@@ -1,7 +1,7 @@
 """The ``ilfo`` command line: thin wrappers over the library, one module per command group
 (``train``: train, eval, plot, snapshot; ``diagnose``; ``experts``: expert train / export /
 eval; ``data``: reward, demos info / convert / collect, label; ``experiments``: sweep run /
-create / status / snapshot, report, reproduce)."""
+create / status / snapshot, reproduce; ``report``)."""
 
 from __future__ import annotations
 
@@ -14,8 +14,9 @@ from ilfo.cli._common import Parser, check_jax_platforms
 from ilfo.cli._common import _command as _command  # re-exported: ilfo.cli._command
 from ilfo.cli.data import _add_demos_parser, _add_label_parser, _add_reward_parser
 from ilfo.cli.diagnose import _add_diagnose_parser
-from ilfo.cli.experiments import _add_report_parser, _add_reproduce_parser, _add_sweep_parser
+from ilfo.cli.experiments import _add_reproduce_parser, _add_sweep_parser
 from ilfo.cli.experts import _add_expert_parser
+from ilfo.cli.report import _add_report_parser
 from ilfo.cli.train import (
     _add_eval_parser,
     _add_plot_parser,

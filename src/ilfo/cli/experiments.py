@@ -1,4 +1,4 @@
-"""``ilfo sweep run | create | status | snapshot``, ``ilfo report``, ``ilfo reproduce``."""
+"""``ilfo sweep run | create | status | snapshot``, ``ilfo reproduce``."""
 
 from __future__ import annotations
 
@@ -29,6 +29,12 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
         "any point without losing work.",
     )
     actions = p.add_subparsers(dest="sweep_command", required=True)
+    _add_sweep_run_parser(actions)
+    _add_sweep_create_parser(actions)
+    _add_sweep_status_and_snapshot_parsers(actions)
+
+
+def _add_sweep_run_parser(actions: argparse._SubParsersAction) -> None:
     run = actions.add_parser(
         "run",
         allow_abbrev=False,  # --seed is an `ilfo train` flag, not short for --seeds
@@ -79,6 +85,9 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
     run.add_argument("--dry-run", action="store_true", help="list the runs and stop")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.set_defaults(run=_run_sweep, takes_train_flags=True)
+
+
+def _add_sweep_create_parser(actions: argparse._SubParsersAction) -> None:
     create = actions.add_parser(
         "create",
         allow_abbrev=False,
@@ -98,6 +107,9 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
     )
     _add_spec_arguments(create)
     create.set_defaults(run=_run_sweep_create, takes_train_flags=True)
+
+
+def _add_sweep_status_and_snapshot_parsers(actions: argparse._SubParsersAction) -> None:
     status = actions.add_parser("status", help="Show each run's state and the sweep's progress.")
     status.add_argument(
         "dir", nargs="+", metavar="DIR", help="a sweep directory, or several (one bar over all)"
@@ -456,43 +468,6 @@ def _run_sweep_snapshot(args: argparse.Namespace) -> int:
     for name, what in kept.items():
         print(f"{name:<{width}}  {what}")
     print(f"wrote {args.out}; continue it with `ilfo sweep run {args.out}`")
-    return 0
-
-
-def _add_report_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "report",
-        help="Tables and figures over runs: final scores, IQM with bootstrap CIs, the paper's.",
-        description=(
-            "Report on runs (sweep directories, run directories, or folders holding them): per "
-            "task x algo x demos (x variant), the paper's final performance (the last "
-            "evaluation's normalised score, mean +- std over seeds) beside the IQM with a 95% "
-            "stratified-bootstrap interval and the paper's number (flagged when outside its "
-            "+- 2 std); aggregates over tasks, probability of improvement, learning curves and "
-            "performance profiles. Writes report.md, cells.csv, aggregates.csv, "
-            "improvement.csv and PNG figures."
-        ),
-    )
-    p.add_argument("paths", nargs="+", help="sweep or run directories (searched recursively)")
-    p.add_argument("--out", default="report", help="output directory (default: report)")
-    p.add_argument("--resamples", type=int, default=2000, help="bootstrap resamples (default 2000)")
-    p.set_defaults(run=_run_report)
-
-
-def _run_report(args: argparse.Namespace) -> int:
-    from ilfo.experiments.report import build_report, collect_runs
-    from ilfo.experiments.report_tables import write_report
-
-    if args.resamples < 100:
-        raise ValueError(f"--resamples must be >= 100, got {args.resamples}")
-    runs, skipped = collect_runs(args.paths)
-    for line in skipped:
-        print(f"left out: {line}", file=sys.stderr)
-    if not runs:
-        raise ValueError(f"no run with an evaluation under {', '.join(args.paths)}")
-    report = build_report(runs, skipped=skipped, resamples=args.resamples)
-    written = write_report(report, args.out, sources=args.paths)
-    print(f"{len(runs)} runs, {len(report.cells)} cells; wrote {', '.join(map(str, written))}")
     return 0
 
 

@@ -14,6 +14,18 @@ from ilfo.cli._common import _command
 def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("expert", help="Train, export and evaluate SAC experts.")
     esub = p.add_subparsers(dest="expert_command", required=True)
+    _add_expert_train_parser(esub)
+    _add_expert_export_parser(esub)
+    e = esub.add_parser("eval", help="Mean and std return of a shipped (or given) expert.")
+    e.add_argument("env", help="environment id with a shipped expert, or an expert directory")
+    e.add_argument(
+        "--episodes", type=int, default=10, help="episodes, seeds 1000, 1001, ... (default 10)"
+    )
+    e.add_argument("--json", action="store_true", help="one JSON line")
+    e.set_defaults(run=_run_expert_eval)
+
+
+def _add_expert_train_parser(esub: argparse._SubParsersAction) -> None:
     t = esub.add_parser(
         "train",
         help="SAC on the task reward, checkpointed and resumable in segments.",
@@ -86,6 +98,9 @@ def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
     )
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
     t.set_defaults(run=_run_expert_train)
+
+
+def _add_expert_export_parser(esub: argparse._SubParsersAction) -> None:
     x = esub.add_parser("export", help="Export a run's policy as the env's shipped expert.")
     x.add_argument("run_dir", help="the expert's run directory")
     x.add_argument("--out", default=None, help="expert directory (default data/experts/<env>)")
@@ -107,13 +122,6 @@ def _add_expert_parser(sub: argparse._SubParsersAction) -> None:
         help="a sentence for the card, e.g. why an expert short of the paper's is shipped",
     )
     x.set_defaults(run=_run_expert_export)
-    e = esub.add_parser("eval", help="Mean and std return of a shipped (or given) expert.")
-    e.add_argument("env", help="environment id with a shipped expert, or an expert directory")
-    e.add_argument(
-        "--episodes", type=int, default=10, help="episodes, seeds 1000, 1001, ... (default 10)"
-    )
-    e.add_argument("--json", action="store_true", help="one JSON line")
-    e.set_defaults(run=_run_expert_eval)
 
 
 def _run_expert_train(args: argparse.Namespace) -> int:

@@ -362,7 +362,7 @@ def _add_snapshot_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _run_snapshot(args: argparse.Namespace) -> int:
-    from ilfo.training.run_dir import snapshot_run
+    from ilfo.training.checkpoint import snapshot_run
 
     out = snapshot_run(args.run_dir, args.out)
     size = sum(f.stat().st_size for f in out.rglob("*") if f.is_file())

@@ -121,81 +121,117 @@ def with_learned_reward(agent: TD3 | SAC, setup: LearnedRewardSetup) -> LearnedR
     ``metrics_of``) trained on ``setup.reward``, learned from the expert transitions and the
     replay buffer's; its updates run as ``agent.update`` would, on batches rewarded by the
     reward."""
-    reward, expert, time_feature = setup.reward, setup.expert, setup.time_feature
-
-    def init(seed: int) -> LearnedRewardState:
-        key, k_reward = jax.random.split(jax.random.fold_in(jax.random.PRNGKey(seed), 1))
-        return LearnedRewardState(
-            agent=agent.init(seed),
-            reward=reward.init(k_reward, expert),
-            updates=jnp.array(0, jnp.int32),
-            key=key,
-        )
-
-    def update_step(state: LearnedRewardState, batch: ReplayData, key: jax.Array, **kwargs):
-        rewards = reward.reward(
-            state.reward,
-            env_observations(batch.obs, time_feature),
-            env_observations(batch.next_obs, time_feature),
-        )
-        agent_state, out = agent.update_step(
-            state.agent, batch._replace(reward=rewards), key, **kwargs
-        )
-        state = state.replace(agent=agent_state, updates=state.updates + 1)
-        return state, (*out, jnp.mean(rewards))
-
-    def agent_updates(state: LearnedRewardState, data: ReplayData, size, num_updates: int):
-        state, outs = agent.run_updates(
-            update_step, state, data, size, num_updates, state.agent.step
-        )
-        return state, {**agent.metrics_of(outs, state.agent), "reward_mean": jnp.mean(outs[-1])}
-
-    agent_updates_jit = jax.jit(agent_updates, static_argnames="num_updates")
+    reward, time_feature = setup.reward, setup.time_feature
+    update_step = functools.partial(_update_step, agent, reward, time_feature)
+    agent_updates = functools.partial(_agent_updates, agent, update_step)
     reward_steps_jit = jax.jit(
         functools.partial(reward_steps, reward, time_feature), static_argnames="num_steps"
     )
-
-    def update(state: LearnedRewardState, data: ReplayData, size, num_updates: int):
-        metrics: dict[str, jax.Array] = {}
-        due = (
-            0
-            if setup.schedule is None
-            else setup.schedule.steps_due(int(state.updates), num_updates)
-        )
-        if due:
-            state, metrics = reward_steps_jit(state, data, size, expert, num_steps=due)
-        state, agent_metrics = agent_updates_jit(state, data, size, num_updates=num_updates)
-        return state, {**agent_metrics, **metrics}
-
-    def set_normalizer(state: LearnedRewardState, mean: ArrayLike, std: ArrayLike):
-        return state.replace(agent=agent.set_normalizer(state.agent, mean, std))
-
-    learn_from_rollouts = None
-    if setup.rollouts is not None:
-
-        def learn(state: LearnedRewardState, trajectories: jax.Array, expert_trajs: jax.Array):
-            key, k_reward = jax.random.split(state.key)
-            reward_state, metrics = reward.update_from_rollouts(  # type: ignore[attr-defined]
-                state.reward, trajectories, expert_trajs, k_reward
-            )
-            return state.replace(reward=reward_state, key=key), metrics
-
-        learn_jit = jax.jit(learn)
-
-        def learn_from_rollouts(state: LearnedRewardState, trajectories: Any):
-            trajectories = jnp.asarray(trajectories, jnp.float32)
-            return learn_jit(state, trajectories, setup.expert_trajectories)
-
     return LearnedRewardAgent(
         obs_dim=agent.obs_dim,
         action_dim=agent.action_dim,
         max_action=agent.max_action,
-        init=init,
+        init=functools.partial(_init, agent, reward, setup.expert),
         act=agent.act,
-        update=update,
-        set_normalizer=set_normalizer,
+        update=functools.partial(
+            _update,
+            setup,
+            jax.jit(agent_updates, static_argnames="num_updates"),
+            reward_steps_jit,
+        ),
+        set_normalizer=functools.partial(_set_normalizer, agent),
         q_values=lambda state, obs, action: agent.q_values(state.agent, obs, action),
         rewards=jax.jit(lambda state, obs, next_obs: reward.reward(state.reward, obs, next_obs)),
         rollouts=setup.rollouts,
-        learn_from_rollouts=learn_from_rollouts,
+        learn_from_rollouts=None if setup.rollouts is None else _rollout_learning(setup),
     )
+
+
+def _init(
+    agent: TD3 | SAC, reward: LearnedReward, expert: Transitions, seed: int
+) -> LearnedRewardState:
+    key, k_reward = jax.random.split(jax.random.fold_in(jax.random.PRNGKey(seed), 1))
+    return LearnedRewardState(
+        agent=agent.init(seed),
+        reward=reward.init(k_reward, expert),
+        updates=jnp.array(0, jnp.int32),
+        key=key,
+    )
+
+
+def _update_step(
+    agent: TD3 | SAC,
+    reward: LearnedReward,
+    time_feature: bool,
+    state: LearnedRewardState,
+    batch: ReplayData,
+    key: jax.Array,
+    **kwargs: Any,
+) -> tuple[LearnedRewardState, tuple[jax.Array, ...]]:
+    """The agent's update step on ``batch`` rewarded by the reward's current parameters."""
+    rewards = reward.reward(
+        state.reward,
+        env_observations(batch.obs, time_feature),
+        env_observations(batch.next_obs, time_feature),
+    )
+    agent_state, out = agent.update_step(state.agent, batch._replace(reward=rewards), key, **kwargs)
+    state = state.replace(agent=agent_state, updates=state.updates + 1)
+    return state, (*out, jnp.mean(rewards))
+
+
+def _agent_updates(
+    agent: TD3 | SAC,
+    update_step: Callable[..., Any],
+    state: LearnedRewardState,
+    data: ReplayData,
+    size: jax.Array | int,
+    num_updates: int,
+) -> tuple[LearnedRewardState, dict[str, jax.Array]]:
+    state, outs = agent.run_updates(update_step, state, data, size, num_updates, state.agent.step)
+    return state, {**agent.metrics_of(outs, state.agent), "reward_mean": jnp.mean(outs[-1])}
+
+
+def _update(
+    setup: LearnedRewardSetup,
+    agent_updates: Callable[..., tuple[LearnedRewardState, dict[str, jax.Array]]],
+    reward_steps: Callable[..., tuple[LearnedRewardState, dict[str, jax.Array]]],
+    state: LearnedRewardState,
+    data: ReplayData,
+    size: jax.Array | int,
+    num_updates: int,
+) -> tuple[LearnedRewardState, dict[str, jax.Array]]:
+    """The reward's steps that fall due in these updates, then the agent's updates."""
+    metrics: dict[str, jax.Array] = {}
+    due = 0 if setup.schedule is None else setup.schedule.steps_due(int(state.updates), num_updates)
+    if due:
+        state, metrics = reward_steps(state, data, size, setup.expert, num_steps=due)
+    state, agent_metrics = agent_updates(state, data, size, num_updates=num_updates)
+    return state, {**agent_metrics, **metrics}
+
+
+def _set_normalizer(
+    agent: TD3 | SAC, state: LearnedRewardState, mean: ArrayLike, std: ArrayLike
+) -> LearnedRewardState:
+    return state.replace(agent=agent.set_normalizer(state.agent, mean, std))
+
+
+def _rollout_learning(
+    setup: LearnedRewardSetup,
+) -> Callable[..., tuple[LearnedRewardState, dict[str, jax.Array]]]:
+    """``learn_from_rollouts`` of a reward that learns from the policy's episodes."""
+    reward = setup.reward
+
+    def learn(state: LearnedRewardState, trajectories: jax.Array, expert_trajs: jax.Array):
+        key, k_reward = jax.random.split(state.key)
+        reward_state, metrics = reward.update_from_rollouts(  # type: ignore[attr-defined]
+            state.reward, trajectories, expert_trajs, k_reward
+        )
+        return state.replace(reward=reward_state, key=key), metrics
+
+    learn_jit = jax.jit(learn)
+
+    def learn_from_rollouts(state: LearnedRewardState, trajectories: Any):
+        trajectories = jnp.asarray(trajectories, jnp.float32)
+        return learn_jit(state, trajectories, setup.expert_trajectories)
+
+    return learn_from_rollouts

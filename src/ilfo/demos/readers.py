@@ -34,7 +34,7 @@ Formats (nothing here imports minari, d4rl or imitation, and nothing is ever unp
     loaded (their names go to ``provenance["skipped_keys"]``). No env id is stored: pass
     ``env_id``.
 ``ilfo``
-    ilfo's own schema-1 ``.npz`` (:mod:`ilfo.demos.npz`).
+    ilfo's own schema-1 ``.npz`` (``ilfo.demos.npz``).
 
 Every reader checks what it returns: observations (T + 1, d) with T >= 1 and the same d in every
 episode, actions (T, a) with the same a, rewards (T,), all finite. A bad file raises ValueError
@@ -199,7 +199,7 @@ def summarize(demo: DemoFile) -> dict[str, Any]:
 
 
 def read_ilfo(path: str | Path) -> DemoFile:
-    """Read ilfo's own schema-1 ``.npz``: :func:`ilfo.demos.load`, which checks everything."""
+    """Read ilfo's own schema-1 ``.npz``: ``ilfo.demos.load``, which checks everything."""
     return _load_ilfo(path)
 
 

@@ -24,7 +24,7 @@ The adapted environments are the original classes with their default arguments (
 
 ``terminated`` is the original ``done`` (the robot fell, or for the duck task the duck touched
 the ground); the 1,000-step limit is gymnasium's ``TimeLimit``, as in ``pybullet_envs``' registry.
-The ids are registered with gymnasium when :mod:`ilfo.envs` is imported; pybullet itself is only
+The ids are registered with gymnasium when ``ilfo.envs`` is imported; pybullet itself is only
 imported when an environment is made.
 """
 

@@ -5,7 +5,7 @@ environment reports is recorded in ``info["env_terminated"]`` and the episode go
 time limit ends it. Standard mode is plain gymnasium: an episode ends at termination (no
 bootstrapping) or truncation (bootstrapping continues).
 
-PyBullet's Minitaur and MinitaurDuck (:mod:`ilfo.envs.bullet`, registered here) need the optional
+PyBullet's Minitaur and MinitaurDuck (``ilfo.envs.bullet``, registered here) need the optional
 extra: ``pip install -e ".[bullet]"``.
 """
 
@@ -65,7 +65,7 @@ def make_env(
     """Make a gymnasium environment.
 
     Args:
-        env_id: One of :data:`SUPPORTED_ENVS` (other registered ids work without guarantees).
+        env_id: One of ``SUPPORTED_ENVS`` (other registered ids work without guarantees).
         fixed_horizon: Run every episode to ``horizon`` steps, ignoring termination (the paper).
         seed: Seeds the first reset and the action space; later resets continue the same stream.
         horizon: Episode length; the environment's registered limit if None (1,000 for MuJoCo
@@ -76,7 +76,7 @@ def make_env(
             own, (-0.2, 0.2) for Hopper-v5, (-1, 1) for Walker2d-v5. A stricter range trains
             experts that keep a margin from a fall (docs/experts.md).
         contact_forces: False drops the contact forces that end Ant-v5's and Humanoid-v5's
-            observations (:data:`CONTACT_FORCE_DIMS`; gymnasium's
+            observations (``CONTACT_FORCE_DIMS``; gymnasium's
             ``include_cfrc_ext_in_observation=False``): the information the paper's v2 tasks
             gave, whose contact forces were all zero.
 

@@ -34,7 +34,7 @@ from ilfo.experiments.attempts import (
     unended_workers,
 )
 from ilfo.experiments.sweep import LAUNCH_LOCK, RunStatus, Sweep, run_status, summary, sweep_labels
-from ilfo.experiments.worker import EXIT_BUSY, PARENT_SIGNAL_ENV
+from ilfo.experiments.worker_protocol import EXIT_BUSY, PARENT_SIGNAL_ENV
 from ilfo.threads import thread_environment
 
 EXIT_INTERRUPTED = 130
@@ -365,89 +365,132 @@ def _schedule(
     poll_seconds: float,
     on_change: Callable[[list[RunStatus], str], None] | None,
 ) -> list[RunStatus]:
-    runs = {(i, run.name): run for i, sweep in enumerate(sweeps) for run in sweep.runs}
-    statuses = {
-        (i, status.name): status for i, sweep in enumerate(sweeps) for status in sweep.statuses()
-    }
-    queue = [key for key, s in statuses.items() if s.state == "pending" and key in chosen]
-    elsewhere = [key for key, s in statuses.items() if s.state == "running" and key in chosen]
-    active: dict[int, tuple[_Key, Job]] = {}  # slot -> its run and job
-    notify = on_change or (lambda statuses, message: None)
-    last_progress = time.monotonic()
-
-    labels = sweep_labels(sweeps)
-
-    def label(key: _Key) -> str:
-        return key[1] if len(sweeps) == 1 else f"{labels[key[0]]}/{key[1]}"
-
-    def refresh(key: _Key) -> RunStatus:
-        statuses[key] = run_status(sweeps[key[0]], runs[key])
-        return statuses[key]
-
-    def enqueue(key: _Key) -> None:  # after its sweep's queued runs, before later sweeps'
-        later = [i for i, queued in enumerate(queue) if queued[0] > key[0]]
-        queue.insert(later[0] if later else len(queue), key)
-
-    def ends_recorded(key: _Key) -> int:
-        return sum(e.get("event") == "end" for e in read_attempts(sweeps[key[0]], key[1]))
-
-    ends_at_start: dict[_Key, int] = {}
-
+    queue = _Queue(sweeps, chosen, backend, on_change)
     backend.watch(sweeps)
     try:
-        while queue or active or elsewhere:
-            for slot in range(backend.slots):
-                if slot not in active and queue:
-                    key = queue.pop(0)
-                    state = refresh(key).state  # another process may have started it since
-                    if state != "pending":
-                        if state == "running":
-                            elsewhere.append(key)
-                        continue
-                    ends_at_start[key] = ends_recorded(key)
-                    active[slot] = key, backend.start(sweeps[key[0]], key[1], slot)
-                    notify(list(statuses.values()), f"started {label(key)}")
+        while queue.busy:
+            queue.start_runs()
             time.sleep(poll_seconds)
-            for slot, (key, job) in list(active.items()):
-                code = job.poll()
-                if code is None:
-                    continue
-                del active[slot]
-                if code != EXIT_INTERRUPTED and ends_recorded(key) == ends_at_start[key]:
-                    # Killed (OOM, SIGKILL, a lost node), or it failed before it could record
-                    # its end (a full disk, a bad pin): counted as a failure, so that the
-                    # retries bound it.
-                    _record_killed(sweeps[key[0]], key[1], job, code)
-                status = refresh(key)
-                if status.state == "pending":
-                    enqueue(key)  # an error within the retries, or an interruption
-                elif status.state == "running":  # another process trains it: wait for that
-                    elsewhere.append(key)
-                notify(list(statuses.values()), f"{label(key)}: {_ended(status, code)}")
-            for key in list(elsewhere):
-                status = refresh(key)
-                if status.state != "running":
-                    elsewhere.remove(key)
-                    if status.state == "pending":
-                        enqueue(key)
-            if time.monotonic() - last_progress >= PROGRESS_SECONDS:  # the running runs' steps
-                for key, _ in active.values():
-                    refresh(key)
-                last_progress = time.monotonic()
-            notify(list(statuses.values()), "")
+            queue.collect_ended()
+            queue.follow_elsewhere()
+            queue.refresh_progress()
+            queue.notify("")
     except KeyboardInterrupt:
-        for _, job in active.values():
-            job.interrupt()
-        deadline = time.monotonic() + 300  # each worker checkpoints before it exits
-        while active and time.monotonic() < deadline:
-            for slot, (_, job) in list(active.items()):
-                if job.poll() is not None:
-                    del active[slot]
-            time.sleep(0.2)
+        queue.interrupt()
         raise
     finally:
         backend.close()
-    return [refresh(key) for key in runs]
+    return [queue.refresh(key) for key in queue.runs]
+
+
+class _Queue:
+    """The scheduler's state: the chosen runs waiting for a slot, those running in a slot,
+    and those another process trains (waited for)."""
+
+    def __init__(
+        self,
+        sweeps: list[Sweep],
+        chosen: set[_Key],
+        backend: Backend,
+        on_change: Callable[[list[RunStatus], str], None] | None,
+    ) -> None:
+        self.sweeps, self.backend = sweeps, backend
+        self.runs = {(i, run.name): run for i, sweep in enumerate(sweeps) for run in sweep.runs}
+        self.statuses = {
+            (i, status.name): status
+            for i, sweep in enumerate(sweeps)
+            for status in sweep.statuses()
+        }
+        statuses = self.statuses.items()
+        self.queue = [key for key, s in statuses if s.state == "pending" and key in chosen]
+        self.elsewhere = [key for key, s in statuses if s.state == "running" and key in chosen]
+        self.active: dict[int, tuple[_Key, Job]] = {}  # slot -> its run and job
+        self.on_change = on_change or (lambda statuses, message: None)
+        self.last_progress = time.monotonic()
+        self.labels = sweep_labels(sweeps)
+        self.ends_at_start: dict[_Key, int] = {}
+
+    @property
+    def busy(self) -> bool:
+        return bool(self.queue or self.active or self.elsewhere)
+
+    def notify(self, message: str) -> None:
+        self.on_change(list(self.statuses.values()), message)
+
+    def label(self, key: _Key) -> str:
+        return key[1] if len(self.sweeps) == 1 else f"{self.labels[key[0]]}/{key[1]}"
+
+    def refresh(self, key: _Key) -> RunStatus:
+        self.statuses[key] = run_status(self.sweeps[key[0]], self.runs[key])
+        return self.statuses[key]
+
+    def enqueue(self, key: _Key) -> None:
+        """After its sweep's queued runs, before later sweeps'."""
+        later = [i for i, queued in enumerate(self.queue) if queued[0] > key[0]]
+        self.queue.insert(later[0] if later else len(self.queue), key)
+
+    def ends_recorded(self, key: _Key) -> int:
+        return sum(e.get("event") == "end" for e in read_attempts(self.sweeps[key[0]], key[1]))
+
+    def start_runs(self) -> None:
+        """Fill the free slots from the queue."""
+        for slot in range(self.backend.slots):
+            if slot not in self.active and self.queue:
+                key = self.queue.pop(0)
+                state = self.refresh(key).state  # another process may have started it since
+                if state != "pending":
+                    if state == "running":
+                        self.elsewhere.append(key)
+                    continue
+                self.ends_at_start[key] = self.ends_recorded(key)
+                self.active[slot] = key, self.backend.start(self.sweeps[key[0]], key[1], slot)
+                self.notify(f"started {self.label(key)}")
+
+    def collect_ended(self) -> None:
+        """Free the slots of the runs that ended; queue again those that may go on."""
+        for slot, (key, job) in list(self.active.items()):
+            code = job.poll()
+            if code is None:
+                continue
+            del self.active[slot]
+            if code != EXIT_INTERRUPTED and self.ends_recorded(key) == self.ends_at_start[key]:
+                # Killed (OOM, SIGKILL, a lost node), or it failed before it could record
+                # its end (a full disk, a bad pin): counted as a failure, so that the
+                # retries bound it.
+                _record_killed(self.sweeps[key[0]], key[1], job, code)
+            status = self.refresh(key)
+            if status.state == "pending":
+                self.enqueue(key)  # an error within the retries, or an interruption
+            elif status.state == "running":  # another process trains it: wait for that
+                self.elsewhere.append(key)
+            self.notify(f"{self.label(key)}: {_ended(status, code)}")
+
+    def follow_elsewhere(self) -> None:
+        """Queue again the runs another process trained and left unfinished."""
+        for key in list(self.elsewhere):
+            status = self.refresh(key)
+            if status.state != "running":
+                self.elsewhere.remove(key)
+                if status.state == "pending":
+                    self.enqueue(key)
+
+    def refresh_progress(self) -> None:
+        """Read the running runs' steps, every PROGRESS_SECONDS."""
+        if time.monotonic() - self.last_progress >= PROGRESS_SECONDS:
+            for key, _ in self.active.values():
+                self.refresh(key)
+            self.last_progress = time.monotonic()
+
+    def interrupt(self) -> None:
+        """Interrupt every worker, and wait for them to end (each checkpoints first)."""
+        for _, job in self.active.values():
+            job.interrupt()
+        deadline = time.monotonic() + 300
+        while self.active and time.monotonic() < deadline:
+            for slot, (_, job) in list(self.active.items()):
+                if job.poll() is not None:
+                    del self.active[slot]
+            time.sleep(0.2)
 
 
 def _record_killed(sweep: Sweep, name: str, job: Job, code: int) -> None:

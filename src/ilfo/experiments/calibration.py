@@ -139,7 +139,7 @@ def pearson(points: Sequence[CalibrationPoint]) -> float:
     """Linear correlation of task score and proxy return over all episodes: what the paper's
     scatter plots show. Spearman's ranks are pulled down where many poor policies tie on the
     floor of both returns (their order there is noise); Pearson's r weighs them by distance.
-    NaN, without a warning, where it is undefined, as :func:`spearman`."""
+    NaN, without a warning, where it is undefined, as ``spearman``."""
     arrays = _score_proxy_arrays(points)
     if arrays is None:
         return float("nan")

@@ -343,9 +343,13 @@ def create_sweep(root: str | Path, spec: SweepSpec) -> Sweep:
     for sub in SWEEP_PARTS:
         (root / sub).mkdir(exist_ok=True)
     matching_sweep(root, spec)  # one another process made meanwhile must be this sweep
+    from ilfo.training.migrations import config_record
+
     record = {
         "spec": spec.to_dict(),
-        "runs": [{"name": r.name, "variant": r.variant, "config": r.config} for r in runs],
+        "runs": [
+            {"name": r.name, "variant": r.variant, "config": config_record(r.config)} for r in runs
+        ],
         "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
     write_json_atomic(manifest, record)
@@ -374,7 +378,10 @@ def matching_sweep(root: str | Path, spec: SweepSpec) -> Sweep | None:
 
 
 def open_sweep(root: str | Path) -> Sweep:
-    """The sweep in ``root``, read from its manifest (clear errors for what is not one)."""
+    """The sweep in ``root``, read from its manifest (clear errors for what is not one); its
+    runs' configs in today's format (``training.migrations``)."""
+    from ilfo.training.migrations import upgrade_sweep_run_config
+
     root = Path(root)
     path = root / MANIFEST_FILE
     if not path.is_file():
@@ -389,6 +396,10 @@ def open_sweep(root: str | Path) -> Sweep:
         steps = run.config.get("steps") if isinstance(run.config, dict) else None
         if type(steps) is not int or not isinstance(run.name, str):
             raise ValueError(f"{path}: run {run.name!r} has steps {steps!r}, not a whole number")
+    runs = tuple(
+        SweepRun(r.name, upgrade_sweep_run_config(r.config, f"{path} (run {r.name})"), r.variant)
+        for r in runs
+    )
     return Sweep(root, spec, runs)
 
 
@@ -407,7 +418,8 @@ def snapshot_sweep(root: str | Path, out: str | Path) -> dict[str, str]:
     running (stop the sweep first: Ctrl-C checkpoints every run)."""
     import shutil
 
-    from ilfo.training.run_dir import checkpoint_steps, copy_results, snapshot_run
+    from ilfo.training.checkpoint import snapshot_run
+    from ilfo.training.run_dir import checkpoint_steps, copy_results
 
     sweep, out = open_sweep(root), Path(out)
     check_new_copy_dir(sweep.root, out)

@@ -7,7 +7,7 @@ run, or resumes it from its newest checkpoint, and records the attempt's start (
 pinning it got) and its end (done, interrupted, or the error) in ``attempts/NAME.jsonl``.
 
 Exit status: 0 done, 130 interrupted (SIGINT: the run checkpointed first), 1 failed, 75
-(``EXIT_BUSY``) another process holds the run's lock.
+(``worker_protocol.EXIT_BUSY``) another process holds the run's lock.
 """
 
 from __future__ import annotations
@@ -18,13 +18,8 @@ import sys
 import traceback
 from collections.abc import Mapping, Sequence
 
+from ilfo.experiments.worker_protocol import EXIT_BUSY, PARENT_SIGNAL_ENV
 from ilfo.threads import CPUS_ENV, THREAD_VARIABLES
-
-PARENT_SIGNAL_ENV = "ILFO_PARENT_DEATH_SIGNAL"
-"""Set by the local backend: the worker gets SIGINT when its sweep process dies (Linux), so
-a killed sweep leaves no orphan runs behind, each checkpointed where it stood."""
-EXIT_BUSY = 75
-"""A worker's exit when another process holds its run's lock (BSD's EX_TEMPFAIL)."""
 
 
 def pin_from_environment(environ: Mapping[str, str] = os.environ) -> list[int] | None:

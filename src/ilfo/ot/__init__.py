@@ -1,7 +1,7 @@
 """Optimal transport on arrays: costs, solvers (Sinkhorn, exact EMD, greedy) and their result.
 
 Knows nothing of RL. Every solver takes a cost matrix (n, m) and optional weights a (n,), b (m,)
-(uniform by default) and returns the same immutable :class:`OTResult`; ``solve(cost, solver)``
+(uniform by default) and returns the same immutable ``OTResult``; ``solve(cost, solver)``
 is the one dispatch between them by name.
 """
 

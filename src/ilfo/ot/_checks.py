@@ -16,7 +16,7 @@ def check_problem(
 
     Missing weights become uniform. With ``balanced`` the masses of a and b must agree to
     ``MASS_RTOL`` (rounding, e.g. float32 weights); solvers that need them exactly equal rescale
-    b (:func:`rebalance`).
+    b (``rebalance``).
     """
     cost = np.asarray(cost, dtype=np.float64)
     if cost.ndim != 2:

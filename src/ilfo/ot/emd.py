@@ -25,7 +25,7 @@ def emd(
             1000 x 10000.
 
     Returns:
-        An :class:`OTResult` with the exact plan and the dual potentials; ``iterations`` is None
+        An ``OTResult`` with the exact plan and the dual potentials; ``iterations`` is None
         (POT does not report it); ``converged`` is False if the pivot limit was hit.
     """
     import ot as pot  # here, not at import: POT's backends import torch, TF, ... where installed

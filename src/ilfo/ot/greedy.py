@@ -25,7 +25,7 @@ def greedy(cost: np.ndarray, a: np.ndarray | None = None, b: np.ndarray | None =
         b: Target weights, shape (m,); uniform if None.
 
     Returns:
-        An :class:`OTResult`; no potentials; ``converged`` is True when all of a was placed.
+        An ``OTResult``; no potentials; ``converged`` is True when all of a was placed.
     """
     cost, a, b = check_problem(cost, a, b, balanced=False)
     if a.sum() > b.sum() * (1 + 1e-9):

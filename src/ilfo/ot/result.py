@@ -1,4 +1,4 @@
-"""The one result type shared by every optimal-transport solver in :mod:`ilfo.ot`."""
+"""The one result type shared by every optimal-transport solver in ``ilfo.ot``."""
 
 from __future__ import annotations
 
@@ -66,7 +66,7 @@ def make_result(
     converged: bool,
     solver: str,
 ) -> OTResult:
-    """Build an :class:`OTResult`, deriving the costs and the marginal error from ``plan``."""
+    """Build an ``OTResult``, deriving the costs and the marginal error from ``plan``."""
     row_costs = np.einsum("ij,ij->i", cost_matrix, plan)
     plan.setflags(write=False)
     row_costs.setflags(write=False)

@@ -82,7 +82,7 @@ def sinkhorn(
             (over-relaxation only) or ``none`` (plain Sinkhorn).
 
     Returns:
-        An :class:`OTResult`; ``converged`` is whether its ``marginal_error`` (absolute, on the
+        An ``OTResult``; ``converged`` is whether its ``marginal_error`` (absolute, on the
         returned plan) is below ``tol * sum(a)``: False if that was not met within ``max_iter``.
     """
     cost, a, b = check_problem(cost, a, b)
@@ -191,11 +191,7 @@ def _solve(
             else:
                 v = v * (b / col) ** omega
             if not (_in_range(u) and _in_range(v)):
-                f += reg * np.log(u)
-                g += reg * np.log(v)
-                _fill_kernel(kernel, cost, f, g, reg)
-                u = np.ones_like(a)
-                v = np.ones_like(b)
+                u, v = _absorb(kernel, cost, f, g, u, v, reg)
             if acceleration != "none" and it >= _WARMUP and (it - _WARMUP) % _RATE_WINDOW == 0:
                 err_before = errors[(it - _RATE_WINDOW) % window]
                 if newton_allowed and it >= _NEWTON_MIN_SINKHORN:
@@ -206,12 +202,8 @@ def _solve(
                 omega = _next_omega(omega, err_before, err)
         if not switch_to_newton:
             break
-        # Newton works on the side with fewer atoms: its linear system has that size.
         budget = min(max_iter - iterations, _NEWTON_MAX_STEPS)
-        if len(b) <= len(a):
-            u, v, steps, converged = _newton(kernel, a, b, v, tol, budget)
-        else:
-            v, u, steps, converged = _newton(kernel.T, b, a, u, tol, budget)
+        u, v, steps, converged = _newton_on_the_smaller_side(kernel, a, b, u, v, tol, budget)
         for k in range(iterations, iterations + min(steps, window)):
             errors[k % window] = np.nan
         iterations += steps
@@ -225,6 +217,40 @@ def _solve(
     return make_result(
         kernel, cost, a, b, f=f, g=g, iterations=iterations, converged=converged, solver="sinkhorn"
     )
+
+
+def _absorb(
+    kernel: np.ndarray,
+    cost: np.ndarray,
+    f: np.ndarray,
+    g: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    reg: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Absorb the scalings into the potentials ``f`` and ``g`` and the kernel (all in place):
+    the scalings start again from ones, which are returned."""
+    f += reg * np.log(u)
+    g += reg * np.log(v)
+    _fill_kernel(kernel, cost, f, g, reg)
+    return np.ones_like(u), np.ones_like(v)
+
+
+def _newton_on_the_smaller_side(
+    kernel: np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    tol: float,
+    budget: int,
+) -> tuple[np.ndarray, np.ndarray, int, bool]:
+    """``_newton`` on the side with fewer atoms (its linear system has that size): the new
+    (u, v), the steps taken and whether it converged."""
+    if len(b) <= len(a):
+        return _newton(kernel, a, b, v, tol, budget)
+    v, u, steps, converged = _newton(kernel.T, b, a, u, tol, budget)
+    return u, v, steps, converged
 
 
 def _newton(

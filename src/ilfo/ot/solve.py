@@ -26,7 +26,7 @@ def solve(
 ) -> OTResult:
     """The coupling of ``cost`` (n, m) between uniform weights by ``solver``: ``sinkhorn``
     (entropic OT with ``reg``, ``tol`` relative to the mass, an int ``max_iter`` and the warm
-    start ``init``, all checked as :func:`~ilfo.ot.sinkhorn` does), ``emd`` (exact, network
+    start ``init``, all checked as ``ilfo.ot.sinkhorn`` does), ``emd`` (exact, network
     simplex) or ``greedy`` (PWIL's; rows in order). The Sinkhorn settings apply to Sinkhorn
     only."""
     if solver == "sinkhorn":

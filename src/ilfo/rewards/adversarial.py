@@ -52,7 +52,7 @@ __all__ = [
 ]
 
 COSINE_EPS = 1e-12
-"""Floor of the feature norms in :func:`cosine_cost` (the authors' code has none)."""
+"""Floor of the feature norms in ``cosine_cost`` (the authors' code has none)."""
 
 # Atoms are padded to a multiple of this many rows before the jitted calls, so that episodes of
 # many different lengths (standard, terminating episodes) share a few compiled shapes.
@@ -137,7 +137,7 @@ class AdversarialCritic:
         return -total / max(len(pairs) - 1, 1)
 
     def loss_and_grad(self, params: Any, pairs: Sequence[Pair]) -> tuple[float, Any]:
-        """The critic's loss (see :meth:`loss`) and its gradient (numpy leaves), pair by pair
+        """The critic's loss (see ``loss``) and its gradient (numpy leaves), pair by pair
         through one jitted call each on padded atoms: pairs of many lengths compile a few
         shapes, not one each."""
         if not pairs:
@@ -202,7 +202,7 @@ def critic_arrays(state: CriticState, prefix: str = "critic/") -> dict[str, np.n
 def load_critic_arrays(
     template: CriticState, arrays: dict[str, np.ndarray], prefix: str = "critic/"
 ) -> CriticState:
-    """The critic state that :func:`critic_arrays` wrote, restored into ``template``'s structure.
+    """The critic state that ``critic_arrays`` wrote, restored into ``template``'s structure.
 
     Raises:
         ValueError: an array is missing, unexpected, or of another shape than the template's

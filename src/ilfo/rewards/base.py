@@ -55,7 +55,7 @@ class RewardState:
 
 class EpisodeReward(Protocol):
     """Rewards for one whole learner episode at a time (OOPS, PWIL): observations (T + 1,
-    obs_dim) to a :class:`RewardOutput` of T rewards. ``state`` and ``load_state`` carry what
+    obs_dim) to a ``RewardOutput`` of T rewards. ``state`` and ``load_state`` carry what
     changes between episodes (random draws, warm starts) across a checkpoint, so that a resumed
     run rewards exactly as the uninterrupted one."""
 

@@ -103,7 +103,7 @@ class OOPS:
 
     Args:
         demos: Expert demonstrations, each observations of shape (T_i + 1, obs_dim).
-        config: An :class:`OOPSConfig`; the paper's defaults if None.
+        config: An ``OOPSConfig``; the paper's defaults if None.
     """
 
     def __init__(self, demos: Sequence[np.ndarray], config: OOPSConfig | None = None) -> None:

@@ -92,7 +92,7 @@ class AdversarialOOPS:
 
     Args:
         demos: Expert demonstrations, each observations of shape (T_i + 1, obs_dim).
-        config: An :class:`AdversarialOOPSConfig`; its defaults if None.
+        config: An ``AdversarialOOPSConfig``; its defaults if None.
     """
 
     def __init__(

@@ -157,7 +157,7 @@ class SIL:
 
     Args:
         demos: Expert demonstrations, each observations of shape (T_i + 1, obs_dim).
-        config: A :class:`SILConfig`; the authors' defaults if None.
+        config: A ``SILConfig``; the authors' defaults if None.
     """
 
     def __init__(self, demos: Sequence[np.ndarray], config: SILConfig | None = None) -> None:

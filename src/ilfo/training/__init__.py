@@ -11,9 +11,10 @@ and ``best_policy.json`` (the best-evaluated policy, its step and scores) and
 Modules: ``config`` (``TrainConfig``), ``build`` (demos, agent, reward and environments from a
 config, through the registry ``ilfo.algos``), ``rollout`` (episodes of a policy and their scores;
 the one home of the time feature), ``loop`` (``Trainer``, ``LoopHooks``), ``checkpoint``,
-``metrics`` (metrics.csv and TensorBoard), ``run_dir`` (the rules of a run directory and the one
-reader of its policy), ``run_labels`` (how a run was trained otherwise than the defaults),
-``plots``.
+``metrics`` (metrics.csv and TensorBoard), ``run_dir`` (the rules of a run directory),
+``migrations`` (what a run writes says its format; an older run's records are read as
+today's), ``policy`` (the one reader of a run's policy), ``run_labels`` (how a run was trained
+otherwise than the defaults), ``plots``.
 """
 
 from ilfo.training.build import (
@@ -31,7 +32,7 @@ from ilfo.training.build import (
     network_normalizer,
     run_name,
 )
-from ilfo.training.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from ilfo.training.checkpoint import Checkpoint, LoopState, load_checkpoint, save_checkpoint
 from ilfo.training.config import (
     Algo,
     TrainConfig,
@@ -41,6 +42,7 @@ from ilfo.training.config import (
 )
 from ilfo.training.loop import LoopHooks, Trainer
 from ilfo.training.metrics import METRIC_FIELDS, read_metrics
+from ilfo.training.migrations import read_run_config, read_settings
 from ilfo.training.plots import plot_runs
 from ilfo.training.policy import RunPolicy, load_run_policy
 from ilfo.training.rollout import (
@@ -60,8 +62,6 @@ from ilfo.training.run_dir import (
     RunLock,
     create_run_dir,
     latest_checkpoint,
-    read_run_config,
-    read_settings,
 )
 
 __all__ = [
@@ -76,6 +76,7 @@ __all__ = [
     "DemoSource",
     "EnvInfo",
     "LoopHooks",
+    "LoopState",
     "PolicyScores",
     "Rollout",
     "RunDirInUse",

@@ -357,23 +357,12 @@ def settings_for_new_runs(settings: Mapping[str, Any], drop: tuple[str, ...]) ->
     }
 
 
-def config_from_dict(raw: dict[str, Any], source: str | Path) -> TrainConfig:
-    """A ``TrainConfig`` from a record ilfo wrote (config.json, expert.json, a sweep's
-    manifest); a ValueError names ``source`` and the setting at fault (an unknown key, a value
-    of the wrong type). A record without ``contact_forces`` predates the setting, when every
-    run observed them: it reads back as True. A task-reward run's record with ``demos``
-    predates their refusal, when they were ignored: it reads back without them."""
-    raw = without_task_reward_demos({"contact_forces": True, **raw}, raw.get("algo"))
+def config_from_dict(raw: Mapping[str, Any], source: str | Path) -> TrainConfig:
+    """A ``TrainConfig`` from a record ilfo wrote, in today's format (config.json, expert.json
+    and a sweep's manifest are read through ``migrations``, which upgrades older ones); a
+    ValueError names ``source`` and the setting at fault (an unknown key, a value of the wrong
+    type)."""
     return _checked_config(raw, source)
-
-
-def without_task_reward_demos(settings: Mapping[str, Any], algo: Any) -> dict[str, Any]:
-    """A run's record (config.json) without its ``demos`` where ``algo`` learns from the task
-    reward: records from before demos were refused for it list them (they were ignored). Demos
-    given for a run (``--demos``, a settings file of one's own) are still refused."""
-    if isinstance(algo, str) and algo in ALGOS and not ALGOS[algo].imitation:
-        return {key: value for key, value in settings.items() if key != "demos"}
-    return dict(settings)
 
 
 def _checked_config(raw: Mapping[str, Any], source: str | Path) -> TrainConfig:

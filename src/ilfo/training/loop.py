@@ -36,6 +36,7 @@ from ilfo.training.build import (
 )
 from ilfo.training.checkpoint import (
     Checkpoint,
+    LoopState,
     load_checkpoint,
     restore_best_policy,
     save_checkpoint,
@@ -44,6 +45,7 @@ from ilfo.training.config import TrainConfig, config_from_dict
 from ilfo.training.console import bar_postfix, progress_bar, stop_requests
 from ilfo.training.learners import Learner, learner_of
 from ilfo.training.metrics import MetricsLog, truncate_metrics
+from ilfo.training.migrations import config_record, read_run_config, upgrade_run_dir
 from ilfo.training.plots import plot_runs
 from ilfo.training.resources import check_memory
 from ilfo.training.rollout import (
@@ -66,7 +68,6 @@ from ilfo.training.run_dir import (
     latest_checkpoint,
     newest_checkpoint_is_damaged,
     read_demos_record,
-    read_run_config,
     remove_incomplete_checkpoints,
     results_past_first_checkpoint,
 )
@@ -129,13 +130,9 @@ class Trainer:
         """What this kind of learner does differently in the loop (``training.learners``)."""
         self.state = self.agent.functions.init(config.seed)
         self.buffer = self.new_buffer()
-        self.step = 0
-        self.episode = 0
-        self.random_states: list[np.ndarray] = []
-        self.last_eval: dict[str, float] = {}
-        self.elapsed = 0.0
-        self.best_eval: dict[str, float] = {}
-        """The best evaluation so far by ``config.best_by``, with its step."""
+        self.loop_state = LoopState()
+        """The loop's own state (counters, evaluations, random-phase states), which a
+        checkpoint keeps whole; replaced as the loop goes, never changed in place."""
         self._lock = RunLock(self.run_dir)  # held while this trainer writes the run directory
         self._resumed = False  # set by ``resume``: the run directory holds this run already
         self._metrics: MetricsLog | None = None  # opened by ``train``
@@ -143,9 +140,41 @@ class Trainer:
         # agent; for an on-policy one, after each ``learn`` (and after a resume: recomputing
         # the last evaluation gives the same numbers).
         self.policy_changed = True
-        self.refill_until = 0
-        """Updates wait until this step (a run continued from a snapshot refills its buffer)."""
         self._bar: Any = None  # the progress bar while ``train`` runs: ``_collect`` moves it
+
+    @property
+    def step(self) -> int:
+        """Environment steps done (``loop_state``)."""
+        return self.loop_state.step
+
+    @property
+    def episode(self) -> int:
+        """Episodes done (``loop_state``)."""
+        return self.loop_state.episode
+
+    @property
+    def elapsed(self) -> float:
+        """Wall-clock seconds of training so far (``loop_state``)."""
+        return self.loop_state.elapsed
+
+    @property
+    def last_eval(self) -> dict[str, float]:
+        """The last evaluation's metrics, empty before the first (``loop_state``)."""
+        return self.loop_state.last_eval
+
+    @property
+    def best_eval(self) -> dict[str, float]:
+        """The best evaluation so far by ``config.best_by``, with its step (``loop_state``)."""
+        return self.loop_state.best_eval
+
+    @property
+    def refill_until(self) -> int:
+        """Updates wait until this step (a run continued from a snapshot refills its buffer)."""
+        return self.loop_state.refill_until
+
+    def _advance(self, **changes: Any) -> None:
+        """Replace fields of ``loop_state``."""
+        self.loop_state = dataclasses.replace(self.loop_state, **changes)
 
     def checkpoint_plan(self) -> str:
         """Where and when this run checkpoints, in words (the CLI prints it at the start)."""
@@ -186,29 +215,27 @@ class Trainer:
         resolved = self.config.resolved(self.horizon)  # every setting, as the run uses it
         if resolved.demos is not None:  # absolute: eval and resume work from any directory
             resolved = dataclasses.replace(resolved, demos=str(Path(resolved.demos).resolve()))
-        write_json_atomic(config_path, dataclasses.asdict(resolved))
+        # The demos record first: a run directory with a config.json has it (migrations).
         if self.demo_source is not None:
             write_json_atomic(self.run_dir / DEMOS_RECORD_FILE, self.demo_source.as_record(0))
+        write_json_atomic(config_path, config_record(dataclasses.asdict(resolved)))
 
     def _check_demos_record(self) -> None:
         """On resume: warn where the demo file no longer holds what the run started on (an
-        expert re-exported since); record it where the run predates ``demos.json``."""
+        expert re-exported since)."""
         source = self.demo_source
-        if source is None:
+        record = None if source is None else read_demos_record(self.run_dir)
+        if source is None or record is None or record.get("sha256") == source.sha256:
             return
-        record = read_demos_record(self.run_dir)
-        if record is None:
-            write_json_atomic(self.run_dir / DEMOS_RECORD_FILE, source.as_record(self.step))
-        elif record.get("sha256") != source.sha256:
-            warnings.warn(
-                f"{source.path} is not the demo file this run started on "
-                f"({record.get('path')}, sha256 {str(record.get('sha256'))[:12]}..., recorded "
-                f"in {self.run_dir / DEMOS_RECORD_FILE}): the run continues on its demos, whose "
-                f"mean return {source.mean_return:.6g} now divides the scores (it was "
-                f"{record.get('mean_return')}); its report cell is no longer set beside the "
-                "paper's",
-                stacklevel=3,
-            )
+        warnings.warn(
+            f"{source.path} is not the demo file this run started on "
+            f"({record.get('path')}, sha256 {str(record.get('sha256'))[:12]}..., recorded "
+            f"in {self.run_dir / DEMOS_RECORD_FILE}): the run continues on its demos, whose "
+            f"mean return {source.mean_return:.6g} now divides the scores (it was "
+            f"{record.get('mean_return')}); its report cell is no longer set beside the "
+            "paper's",
+            stacklevel=3,
+        )
 
     def _loop(self) -> None:
         """Episodes until ``config.steps``, checkpointing by steps and by the clock; the first
@@ -227,7 +254,7 @@ class Trainer:
                 while self.step < cfg.steps:
                     t0 = time.perf_counter()
                     row = self._episode()
-                    self.elapsed = time.perf_counter() - start_wall
+                    self._advance(elapsed=time.perf_counter() - start_wall)
                     row["wall_time"] = round(self.elapsed, 3)
                     row["steps_per_s"] = round(row.pop("_steps") / (time.perf_counter() - t0), 1)
                     self._metrics.write(row)  # type: ignore[union-attr]
@@ -291,8 +318,7 @@ class Trainer:
             random_phase
         )
         num_steps = len(actions)
-        self.step += num_steps
-        self.episode += 1
+        self._advance(step=self.step + num_steps, episode=self.episode + 1)
 
         rewards = self._episode_rewards(observations, task_rewards, env_terminated)
         agent_obs = agent_observations(observations, self.horizon, self.agent.time_feature)
@@ -302,7 +328,7 @@ class Trainer:
         with self.hooks.timed("replay"):
             self.buffer.add_episode(agent_obs, np.asarray(actions), rewards, terminated=done)
         if random_phase:
-            self.random_states.append(observations[:-1])
+            self._advance(random_states=(*self.loop_state.random_states, observations[:-1]))
 
         row: dict[str, Any] = {
             "step": self.step,
@@ -318,7 +344,7 @@ class Trainer:
             # deterministic (fixed seeds): between two learns it would score the same again.
             if self.policy_changed or not self.last_eval:
                 with self.hooks.timed("evaluate"):
-                    self.last_eval = self.evaluate()
+                    self._advance(last_eval=self.evaluate())
                 self.policy_changed = not self.learner.on_policy
             row.update(self.last_eval)
             self._keep_best()
@@ -399,15 +425,15 @@ class Trainer:
         demo_states = [d[:-1] for d in self.demos]
         if self.learner.on_policy and demo_states:
             states, expert = np.concatenate(demo_states), []
-        elif self.random_states:
-            states, expert = np.concatenate(self.random_states), demo_states
+        elif self.loop_state.random_states:
+            states, expert = np.concatenate(self.loop_state.random_states), demo_states
         else:
             states, expert = np.zeros((1, self.obs_dim)), demo_states
         mean, std = network_normalizer(states, expert)
         if self.agent.time_feature:  # the time feature is already in [0, 1]
             mean, std = np.append(mean, 0.0), np.append(std, 1.0)
         self.state = self.agent.functions.set_normalizer(self.state, mean, std)
-        self.random_states = []
+        self._advance(random_states=())
 
     # ------------------------------------------------------------------------ evaluation
     def evaluate(self) -> dict[str, float]:
@@ -431,7 +457,7 @@ class Trainer:
         """Save the policy as best_policy.msgpack if the last evaluation beats the best one."""
         best_key = f"eval_{self.config.best_by}"
         if self.last_eval[best_key] > self.best_eval.get(best_key, -math.inf):
-            self.best_eval = {"step": self.step, **self.last_eval}
+            self._advance(best_eval={"step": self.step, **self.last_eval})
             self._save_policy(BEST_POLICY_FILE)
             info = {**self.best_eval, "elapsed": self.elapsed}
             write_json_atomic(self.run_dir / BEST_POLICY_INFO, info)
@@ -444,18 +470,7 @@ class Trainer:
         if self._metrics is not None:
             self._metrics.flush()
         reward_state = None if self.rewarder is None else self.rewarder.state()
-        ckpt = Checkpoint(
-            step=self.step,
-            episode=self.episode,
-            elapsed=self.elapsed,
-            last_eval=self.last_eval,
-            best_eval=self.best_eval,
-            agent_state=self.state,
-            buffer=self.buffer,
-            random_states=self.random_states,
-            reward_state=reward_state,
-            refill_until=self.refill_until,
-        )
+        ckpt = Checkpoint(self.loop_state, self.state, self.buffer, reward_state)
         return save_checkpoint(self.run_dir, ckpt)
 
     @classmethod
@@ -474,12 +489,14 @@ class Trainer:
         checkpoint are dropped when training starts (they will be logged again, as
         TensorBoard's are hidden), the best policy is the checkpoint's again
         (``checkpoint.restore_best_policy``), what a killed checkpoint write left is removed,
-        and a new ``steps`` is written to config.json. A run killed before its first checkpoint
-        starts again from step 0 (with a warning); one with no complete checkpoint that holds
-        what only a run past its first writes (``run_dir.results_past_first_checkpoint``: a
-        finished run whose checkpoints were removed) is refused with a ValueError, its files
-        untouched. The returned trainer owns the run directory (``RunDirInUse`` if another
-        process does) until its ``train`` returns.
+        a run directory of an older format is brought to today's
+        (``migrations.upgrade_run_dir``) and a new ``steps`` is written to config.json. A run
+        killed before its first checkpoint starts again from step 0 (with a warning); one with
+        no complete checkpoint that holds what only a run past its first writes
+        (``run_dir.results_past_first_checkpoint``: a finished run whose checkpoints were
+        removed) is refused with a ValueError, its files untouched. The returned trainer owns
+        the run directory (``RunDirInUse`` if another process does) until its ``train``
+        returns.
         """
         run_dir = Path(run_dir)
         raw = read_run_config(run_dir)
@@ -517,11 +534,13 @@ class Trainer:
                     f"{steps} would shorten it; pass at least {trainer.step}"
                 )
             remove_incomplete_checkpoints(run_dir)
+            source = trainer.demo_source
+            upgrade_run_dir(run_dir, None if source is None else source.as_record(trainer.step))
             restore_best_policy(run_dir, checkpoint, trainer.best_eval)
             if trainer.step < config.steps:  # a final policy of a shorter budget is no longer
                 (run_dir / FINAL_POLICY_FILE).unlink(missing_ok=True)  # the run's final one
             if steps is not None:
-                write_json_atomic(run_dir / CONFIG_FILE, raw)
+                write_json_atomic(run_dir / CONFIG_FILE, config_record(raw))
             trainer._check_demos_record()
             truncate_metrics(run_dir / "metrics.csv", trainer.step)
         except BaseException:
@@ -535,15 +554,15 @@ class Trainer:
         a run without continuing it, see ``policy.load_run_policy``."""
         dims = (self.buffer.obs_dim, self.buffer.action_dim)
         ckpt = load_checkpoint(path, self.state, dims)
-        self.refill_until = ckpt.refill_until
-        if ckpt.buffer is None:  # a snapshot's checkpoint (run_dir.snapshot_run)
+        loop = ckpt.loop
+        if ckpt.buffer is None:  # a snapshot's checkpoint (checkpoint.snapshot_run)
             if self.learner.on_policy:
                 raise ValueError(
                     f"{path} has no replay buffer (a snapshot taken before ilfo kept an "
                     "on-policy run's): an on-policy run keeps its pending batch there and "
                     "cannot continue without it; continue the full run directory instead"
                 )
-            self.refill_until = ckpt.step + self.config.random_steps
+            loop = dataclasses.replace(loop, refill_until=loop.step + self.config.random_steps)
             warnings.warn(
                 f"{path} has no replay buffer (a snapshot of the run): the buffer is refilled "
                 f"by {self.config.random_steps:,} steps of the current policy before updates "
@@ -552,10 +571,7 @@ class Trainer:
             )
         else:
             self.buffer = ckpt.buffer
-        self.state = ckpt.agent_state
-        self.step, self.episode, self.elapsed = ckpt.step, ckpt.episode, ckpt.elapsed
-        self.last_eval, self.best_eval = ckpt.last_eval, ckpt.best_eval
-        self.random_states = ckpt.random_states
+        self.state, self.loop_state = ckpt.agent_state, loop
         if ckpt.reward_state is not None and self.rewarder is not None:
             self.rewarder.load_state(ckpt.reward_state)
 

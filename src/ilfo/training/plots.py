@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from ilfo.training.metrics import read_metrics
-from ilfo.training.run_dir import CONFIG_FILE, read_run_config
+from ilfo.training.migrations import read_run_config
+from ilfo.training.run_dir import CONFIG_FILE
 
 Curve = tuple[np.ndarray, np.ndarray]
 """A run's steps and values of the plotted metric."""

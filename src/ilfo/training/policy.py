@@ -12,12 +12,12 @@ from ilfo.files import load_msgpack
 from ilfo.training.build import Agent, EnvInfo, env_info, make_agent, make_run_env
 from ilfo.training.checkpoint import Checkpoint, load_checkpoint
 from ilfo.training.config import TrainConfig, config_from_dict
+from ilfo.training.migrations import read_run_config
 from ilfo.training.run_dir import (
     BEST_POLICY_FILE,
     CONFIG_FILE,
     FINAL_POLICY_FILE,
     latest_checkpoint,
-    read_run_config,
 )
 
 

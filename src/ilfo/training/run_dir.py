@@ -1,6 +1,6 @@
 """Run directories: created once and owned by one process; checkpoints found by what is on disk.
 
-What a run directory holds is described in :mod:`ilfo.training`. The rules here keep many runs
+What a run directory holds is described in ``ilfo.training``. The rules here keep many runs
 started together (a sweep) from mixing, and keep a run resumable whatever moment it was killed:
 
 - ``create_run_dir`` makes a new directory with an exclusive ``mkdir``: two runs started in the
@@ -14,9 +14,8 @@ started together (a sweep) from mixing, and keep a run resumable whatever moment
 - A run with no complete checkpoint starts again from step 0 only where it holds nothing a run
   writes after its first checkpoint (``results_past_first_checkpoint``): a finished run whose
   checkpoints were removed keeps its results, and is not resumed.
-- ``read_run_config`` reads a run directory for any reader (evaluation, experts, bench scripts;
-  ``policy.load_run_policy`` its policy), with a ``ValueError`` naming the file for a damaged
-  one.
+- Its records are read as today's format through ``migrations`` (``read_run_config``), which
+  upgrades an older run's; what a run writes says its format.
 """
 
 from __future__ import annotations
@@ -31,19 +30,18 @@ import re
 import shutil
 import signal
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from ilfo.files import check_new_copy_dir, read_json, read_settings_file
-
-if TYPE_CHECKING:  # for annotations only: the run directory's format needs no agents
-    from ilfo.training.config import TrainConfig
+from ilfo.files import read_json
+from ilfo.training.config import TrainConfig
 
 CONFIG_FILE = "config.json"
 METRICS_FILE = "metrics.csv"
 DEMOS_RECORD_FILE = "demos.json"  # which demo file an imitation run imitates (its sha256)
 CHECKPOINTS_DIR = "checkpoints"
 LOCK_FILE = ".lock"
-CHECKPOINT_FILES = ("state.json", "agent.msgpack")
+STATE_FILE = "state.json"
+CHECKPOINT_FILES = (STATE_FILE, "agent.msgpack")
 """Files every checkpoint has (``state.json`` is written last), beside its replay buffer
 (``REPLAY_FILE``, or ``REPLAY_OMITTED`` in a snapshot's checkpoint)."""
 REPLAY_FILE = "replay.npz"
@@ -191,9 +189,8 @@ def latest_checkpoint(run_dir: str | Path) -> Path | None:
 
 
 def remove_incomplete_checkpoints(run_dir: str | Path) -> None:
-    """Delete what a killed checkpoint write left: ``.tmp_step_*`` directories, checkpoints
-    older than the newest complete one whose removal was cut short, and the stale ``latest``
-    pointer of runs written before checkpoints were found by scanning."""
+    """Delete what a killed checkpoint write left: ``.tmp_step_*`` directories, and checkpoints
+    older than the newest complete one whose removal was cut short."""
     root = Path(run_dir) / CHECKPOINTS_DIR
     if not root.is_dir():
         return
@@ -203,8 +200,6 @@ def remove_incomplete_checkpoints(run_dir: str | Path) -> None:
     for path in damaged_checkpoints(run_dir):
         if latest is not None and _step(path) < _step(latest):
             shutil.rmtree(path, ignore_errors=True)
-    for name in ("latest", ".latest.tmp"):
-        (root / name).unlink(missing_ok=True)
 
 
 CHECKPOINT_CLOCK_SLACK_S = 1.0
@@ -283,56 +278,16 @@ def _best_policy_step(run_dir: Path) -> int | None:
         return None
 
 
-def read_run_config(run_dir: str | Path) -> dict[str, Any]:
-    """A run directory's config.json as a dict, with a clear error for a missing or damaged one
-    (field names and values are checked by ``TrainConfig``: see ``train.config_from_dict``)."""
-    path = Path(run_dir) / CONFIG_FILE
-    if not path.is_file():
-        raise FileNotFoundError(f"{run_dir} is not a run directory (no {CONFIG_FILE})")
-    return _with_episodes_as_run(_read_json_object(path))
-
-
-def read_settings(path: str | Path) -> dict[str, Any]:
-    """A settings file (``files.read_settings_file``), read as the run record it is where it is
-    a run's config.json (one beside its run's metrics.csv): then, as ``read_run_config``
-    reads it, with the episodes that run trained on, so that ``--config RUN/config.json``
-    repeats the run even where its algo's default has changed since (and without the demos a
-    task-reward run's old record lists: ``config.without_task_reward_demos``)."""
-    path = Path(path)
-    settings = read_settings_file(path)
-    if path.name == CONFIG_FILE and (path.parent / METRICS_FILE).is_file():
-        from ilfo.training.config import without_task_reward_demos
-
-        # A task-reward run's record from before demos were refused for it may list them.
-        record = _with_episodes_as_run(settings)
-        return without_task_reward_demos(record, record.get("algo"))
-    return settings
-
-
-def _with_episodes_as_run(config: dict[str, Any]) -> dict[str, Any]:
-    """``config`` with the episodes its run trained on where it predates config.json recording
-    them resolved and its algo's default has changed since
-    (``Recipe.fixed_horizon_when_unrecorded``): an old PWIL-(s) run resumes and reports on the
-    fixed horizon it ran."""
-    from ilfo.algos import ALGOS
-
-    recipe = ALGOS.get(str(config.get("algo")))
-    if config.get("fixed_horizon") is not None or recipe is None:
-        return config
-    if recipe.fixed_horizon_when_unrecorded is None:
-        return config
-    return {**config, "fixed_horizon": recipe.fixed_horizon_when_unrecorded}
-
-
 def read_demos_record(run_dir: str | Path) -> dict[str, Any] | None:
     """A run's ``demos.json`` (``build.DemoSource.as_record``: the demo file it imitates, its
     sha256, the demos' mean return); None for a run without demos or one older than the
     record. A ValueError names a damaged file."""
     path = Path(run_dir) / DEMOS_RECORD_FILE
-    return _read_json_object(path) if path.is_file() else None
+    return read_json_object(path) if path.is_file() else None
 
 
-def _read_json_object(path: Path) -> dict[str, Any]:
+def read_json_object(path: Path) -> dict[str, Any]:
+    """The JSON object in file ``path``; a ValueError names a file that holds none."""
     raw = read_json(path)  # a ValueError naming a file not UTF-8, not JSON or nested too deeply
     if not isinstance(raw, dict):
         raise ValueError(f"{path} must hold a JSON object, not {type(raw).__name__}")
@@ -389,48 +344,3 @@ def copy_results(run_dir: Path, out: Path) -> None:
     for name in SNAPSHOT_FILES:
         if (run_dir / name).is_file():
             shutil.copy2(run_dir / name, out / name)
-
-
-def snapshot_run(run_dir: str | Path, out: str | Path) -> Path:
-    """A copy of a run small enough to keep in git or move between machines: its config,
-    metrics, policies and newest complete checkpoint without the replay buffer (the agent's and
-    the reward's state, a few MB; ``REPLAY_OMITTED`` in place of ``replay.npz``). TensorBoard
-    events are left out (``metrics.csv`` has every row). ``Trainer.resume`` continues it: the
-    buffer is refilled by ``start_steps`` steps of the current policy before updates resume, so
-    the continuation is not the exact one the full run directory gives. An on-policy run (sil)
-    keeps its buffer, which holds only the batch it has collected since its last update (part
-    of its state, at most a batch and an episode: with TRPO's 50,000-step batches up to ~5 MB
-    on Hopper, ~100 MB on Humanoid): it continues exactly.
-
-    Raises FileNotFoundError where ``run_dir`` has no complete checkpoint, FileExistsError
-    where ``out`` exists, and ValueError where another process is writing the run or ``out``
-    lies inside it."""
-    from ilfo.algos import AGENT_PARTS, ALGOS
-
-    run_dir, out = Path(run_dir), Path(out)
-    recipe = ALGOS.get(str(read_run_config(run_dir).get("algo")))  # a run dir, or a clear error
-    # Read off the record alone: a config this version cannot build is still copied.
-    keeps_buffer = recipe is not None and AGENT_PARTS[recipe.agent].on_policy
-    with RunLock(run_dir):  # not while a trainer writes it: a checkpoint could be half-replaced
-        damaged = newest_checkpoint_is_damaged(run_dir)
-        if damaged is not None:
-            raise FileNotFoundError(damaged_checkpoint_message(damaged))
-        checkpoint = latest_checkpoint(run_dir)
-        if checkpoint is None:
-            raise FileNotFoundError(f"{run_dir} has no complete checkpoint to snapshot yet")
-        check_new_copy_dir(run_dir, out)
-        tmp = out.with_name(f".{out.name}.tmp")
-        shutil.rmtree(tmp, ignore_errors=True)
-        (tmp / CHECKPOINTS_DIR).mkdir(parents=True)
-        copy_results(run_dir, tmp)
-        target = tmp / CHECKPOINTS_DIR / checkpoint.name
-        if keeps_buffer:
-            shutil.copytree(checkpoint, target)
-        else:
-            shutil.copytree(checkpoint, target, ignore=shutil.ignore_patterns(REPLAY_FILE))
-            omitted = {"left_out": REPLAY_FILE, "from": str(run_dir.resolve() / CHECKPOINTS_DIR)}
-            if (checkpoint / REPLAY_FILE).is_file():
-                omitted["bytes"] = (checkpoint / REPLAY_FILE).stat().st_size
-            (target / REPLAY_OMITTED).write_text(json.dumps(omitted))
-        tmp.rename(out)
-    return out

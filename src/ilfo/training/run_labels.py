@@ -1,5 +1,6 @@
 """Labels of how a run was trained: its settings where they differ from ``ilfo train``'s
-defaults for its env and algo (the paper's protocol), read from its ``config.json``.
+defaults for its env and algo (the paper's protocol), read from its ``config.json`` (as
+``read_run_config`` reads it: in today's format).
 
 ``run_variant`` (its reward's settings and its observations) and ``training_settings`` (its
 preset, steps, episodes, agent fields) are what ``ilfo report`` sets runs into cells by and
@@ -34,8 +35,7 @@ def shared_settings(settings: Sequence[tuple[str, ...]]) -> tuple[str, ...]:
 
 def _contact_forces_variant(config: dict[str, Any]) -> str | None:
     """ "contact-forces" or "no-contact-forces" for a run that observed Ant's or Humanoid's
-    contact forces otherwise than ``ilfo train``'s default for its algo, else None. A config
-    without the setting predates it, when every run observed them."""
+    contact forces otherwise than ``ilfo train``'s default for its algo, else None."""
     from ilfo.algos import ALGOS
     from ilfo.envs.make import CONTACT_FORCE_DIMS
     from ilfo.training.config import default_contact_forces
@@ -44,7 +44,7 @@ def _contact_forces_variant(config: dict[str, Any]) -> str | None:
     if env not in CONTACT_FORCE_DIMS or algo not in ALGOS:
         return None
     default = default_contact_forces(env, ALGOS[algo].imitation)
-    observed = config.get("contact_forces", True)
+    observed = config.get("contact_forces")
     observed = default if observed is None else bool(observed)
     if observed == default:
         return None
@@ -54,8 +54,8 @@ def _contact_forces_variant(config: dict[str, Any]) -> str | None:
 def _reward_settings_variant(config: dict[str, Any], source: Path) -> str | None:
     """For a run of an imitation algo, the settings of its reward in which it differs from the
     algo's defaults for its env, as "pwil.subsample=20+pwil.kernel_dim=23"; None where it has
-    none (the seed, which the trainer sets, is not a setting). A setting a config predates
-    reads back as its default."""
+    none (the seed, which the trainer sets, is not a setting). A setting newer than the config
+    reads back as its default (``training.migrations``: it keeps what older runs did)."""
     from ilfo.algos import ALGOS, REWARD_PARTS
     from ilfo.training.config import TrainConfig, config_from_dict
 
