@@ -38,6 +38,7 @@ from ilfo.rewards import (
     LearnedReward,
     OOPSConfig,
     PWILConfig,
+    RolloutLearnedReward,
 )
 from ilfo.rewards.oops_adv import AdversarialOOPS, AdversarialOOPSConfig
 from ilfo.rewards.sil import SIL, SILConfig
@@ -93,7 +94,7 @@ class RewardPart(Part):
 class LearnedRewardPart(Part):
     """A reward learned during training (``LearnedReward``), queried inside the agent's update."""
 
-    make: Callable[[Any], LearnedReward]
+    make: Callable[[Any], LearnedReward | RolloutLearnedReward]
     """``make(config)`` -> the reward."""
     schedule: Callable[[Any], Any]
     """``schedule(config)`` -> its ``RewardSchedule`` (when it takes gradient steps on replay

@@ -72,7 +72,9 @@ def enable_compilation_cache(environ: Mapping[str, str] | None = None) -> Path |
     process: JAX fixes its cache on the first compilation."""
     env = os.environ if environ is None else environ
     directory = cache_dir_from_env(env)
-    own = jax.config.jax_compilation_cache_dir  # JAX_COMPILATION_CACHE_DIR, if the user set it
+    # JAX_COMPILATION_CACHE_DIR, if the user set it (JAX defines its options at run time, so
+    # the type checker cannot see them as attributes).
+    own = jax.config.jax_compilation_cache_dir  # type: ignore[attr-defined]
     if directory is None or (own and ENV_VAR not in env):
         return Path(own) if own else None
     try:

@@ -80,6 +80,7 @@ def _write_video(path: str, frames: list[np.ndarray], fps: int) -> None:
             "--video needs imageio and imageio-ffmpeg: pip install imageio-ffmpeg"
         ) from err
     try:
-        imageio.mimsave(path, frames, fps=fps)
+        # imageio's stubs ask for list[ArrayLike], and list is invariant: list[np.ndarray] fails.
+        imageio.mimsave(path, frames, fps=fps)  # type: ignore[arg-type]
     except Exception as err:  # the ffmpeg plugin raises several kinds
         raise ValueError(f"could not write {path}: {err}") from err

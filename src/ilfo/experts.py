@@ -274,7 +274,10 @@ def collect_demos(
         raise ValueError(f"need at least one episode, got {num_episodes}")
     if first_seed < 0:
         raise ValueError(f"seeds must be >= 0, got {first_seed}")
-    episodes, seeds, skipped, kept_falls = [], [], [], []
+    episodes: list[demo_io.Episode] = []
+    seeds: list[int] = []
+    skipped: list[int] = []
+    kept_falls: list[int] = []
     seed, last_seed = first_seed, first_seed + 3 * num_episodes
     while len(episodes) < num_episodes:
         if seed == last_seed:

@@ -161,7 +161,7 @@ def load_msgpack(template: T, path: str | Path, what: str) -> T:
     return restored
 
 
-def load_npz(path: str | Path, what: str) -> dict[str, np.ndarray]:
+def load_npz(path: str | os.PathLike[str], what: str) -> dict[str, np.ndarray]:
     """Every array of an ``.npz`` written by ilfo (never unpickled), or a ValueError naming the
     file: not a zip archive, truncated, or holding objects."""
     path = Path(path)

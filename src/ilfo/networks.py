@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import flax.linen as nn
 import jax
@@ -31,9 +31,11 @@ import jax.numpy as jnp
 
 __all__ = [
     "MLP",
+    "ArrayModule",
     "Critic",
     "CriticEnsemble",
     "DeterministicActor",
+    "PairModule",
     "SquashedGaussianActor",
     "deterministic_squashed",
     "ensemble",
@@ -45,6 +47,25 @@ _LOG_2 = math.log(2.0)
 InitName = Literal["flax", "torch", "glorot"]
 Activation = Literal["relu", "tanh"]
 _ACTIVATIONS = {"relu": nn.relu, "tanh": nn.tanh}
+
+if TYPE_CHECKING:
+    # flax types Module.apply's result as Any | (output, mutated variables), the pair being for
+    # apply(..., mutable=...), which ilfo never calls. These bases tell the type checker what
+    # apply returns; at run time both are flax's Module itself.
+    class ArrayModule(nn.Module):
+        """A module whose ``apply`` returns one array."""
+
+        def apply(self, variables: Any, *args: Any, **kwargs: Any) -> jax.Array: ...
+
+    class PairModule(nn.Module):
+        """A module whose ``apply`` returns two arrays (a Gaussian's mean and log std)."""
+
+        def apply(
+            self, variables: Any, *args: Any, **kwargs: Any
+        ) -> tuple[jax.Array, jax.Array]: ...
+
+else:
+    ArrayModule = PairModule = nn.Module
 
 
 def dense(features: int, fan_in: int, init_scheme: InitName) -> nn.Dense:
@@ -65,7 +86,7 @@ def dense(features: int, fan_in: int, init_scheme: InitName) -> nn.Dense:
     return nn.Dense(features, kernel_init=kernel_init, bias_init=bias_init)
 
 
-class MLP(nn.Module):
+class MLP(ArrayModule):
     """Multilayer perceptron (ReLU or tanh hidden layers) with a linear output layer.
 
     x (..., in_dim) -> (..., out_dim). ``layer_norm``: a LayerNorm after each hidden layer's
@@ -88,7 +109,7 @@ class MLP(nn.Module):
         return dense(self.out_dim, x.shape[-1], self.init_scheme)(x)
 
 
-class DeterministicActor(nn.Module):
+class DeterministicActor(ArrayModule):
     """TD3/DDPG actor: obs (..., obs_dim) -> max_action * tanh(MLP(obs)), (..., action_dim)."""
 
     hidden: Sequence[int]
@@ -101,7 +122,7 @@ class DeterministicActor(nn.Module):
         return self.max_action * jnp.tanh(MLP(self.hidden, self.action_dim, self.init_scheme)(obs))
 
 
-class Critic(nn.Module):
+class Critic(ArrayModule):
     """One Q-function: (obs (..., obs_dim), action (..., action_dim)) -> Q (...)."""
 
     hidden: Sequence[int]
@@ -128,7 +149,7 @@ def ensemble(member: type[nn.Module], size: int) -> type[nn.Module]:
     )
 
 
-class CriticEnsemble(nn.Module):
+class CriticEnsemble(ArrayModule):
     """``num_critics`` independent critics evaluated at once.
 
     (obs (..., obs_dim), action (..., action_dim)) -> Q (num_critics, ...).
@@ -152,7 +173,7 @@ class CriticEnsemble(nn.Module):
         return critic(obs, action)
 
 
-class SquashedGaussianActor(nn.Module):
+class SquashedGaussianActor(PairModule):
     """SAC actor: obs (..., obs_dim) -> (mean, log_std), each (..., action_dim).
 
     The action is ``max_action * tanh(u)`` with ``u ~ N(mean, exp(log_std)^2)``; ``log_std`` is

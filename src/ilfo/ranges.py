@@ -193,7 +193,9 @@ def check_fields(config: Any, flags: str | None = None) -> None:
     A refused value is a ``SettingError`` naming the field; ``flags``: the prefix of the
     fields' command-line flags ("" for unprefixed ones, ``ilfo.config.flag_name``), to name
     the flag too; None names none. Fields that are dataclasses themselves are skipped."""
-    for name, hint, declared_range in _fields(type(config)):
+    # Typed as plain ``type``: mypy takes ``type[Any]`` for unhashable (functools.cache's key).
+    cls: type = type(config)
+    for name, hint, declared_range in _fields(cls):
         value = getattr(config, name)
         flag = None if flags is None else flag_name(name, flags)
         checked = _checked(value, hint, declared_range, name, flag)
@@ -278,8 +280,8 @@ def _kind(hint: Any) -> str:
     """What a type hint accepts, in words (``an integer or none``)."""
     origin, args = get_origin(hint), get_args(hint)
     if origin in (typing.Union, types.UnionType):
-        words = [_kind(a) for a in args if a is not type(None)]
-        return " or ".join(words) + (" or none" if type(None) in args else "")
+        alternatives = [_kind(a) for a in args if a is not type(None)]
+        return " or ".join(alternatives) + (" or none" if type(None) in args else "")
     if origin is Literal:
         return "one of " + ", ".join(map(repr, args))
     if origin is tuple:

@@ -27,7 +27,7 @@ import os
 from collections import OrderedDict
 from collections.abc import Sequence
 from functools import partial
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import jax
 import jax.numpy as jnp
@@ -177,13 +177,10 @@ class ReplayBuffer:
 
         length = _padded_length(t)
         idx = (self.ptr + np.arange(t)) % self.capacity
-        chunk = ReplayData(
-            obs=_pad(obs[:-1], length),
-            action=_pad(act, length),
-            reward=_pad(rew, length),
-            next_obs=_pad(obs[1:], length),
-            not_done=_pad(not_done, length),
-        )
+        # numpy arrays in ReplayData's fields (obs, action, reward, next_obs, not_done, in this
+        # order): the jitted _scatter takes them in as jax.Arrays.
+        host = [_pad(x, length) for x in (obs[:-1], act, rew, obs[1:], not_done)]
+        chunk = ReplayData(*cast(list[jax.Array], host))
         self.data = _scatter(self.data, chunk, _pad(idx, length, fill=self.capacity))
 
         episode_id = self.num_episodes

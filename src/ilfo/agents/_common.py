@@ -15,8 +15,7 @@ from numpy.typing import ArrayLike
 from ilfo.replay import ReplayData, sample_batch
 
 
-@flax.struct.dataclass
-class Policy:
+class Policy(flax.struct.PyTreeNode):
     """What acting needs of an agent state (a pytree): the actor and the observation normaliser.
 
     The agents' ``act`` takes a full state or a ``Policy``. A ``Policy`` has a handful of leaves

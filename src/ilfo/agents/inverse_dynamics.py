@@ -28,8 +28,7 @@ __all__ = [
 ]
 
 
-@flax.struct.dataclass
-class RunningMoments:
+class RunningMoments(flax.struct.PyTreeNode):
     """Running mean and variance of vectors (a pytree), as the authors' RunningMeanStd: it
     starts from a pseudo-count of 1e-2 with mean 0 and variance 1, and its std is floored at
     0.1 (sqrt(max(var, 1e-2)))."""
@@ -77,8 +76,7 @@ class InverseDynamicsConfig:
         check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
 
 
-@flax.struct.dataclass
-class InverseDynamicsState:
+class InverseDynamicsState(flax.struct.PyTreeNode):
     params: Any
     opt_state: optax.OptState
     moments: RunningMoments

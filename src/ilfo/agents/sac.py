@@ -97,8 +97,7 @@ class SACConfig:
             )
 
 
-@flax.struct.dataclass
-class SACState:
+class SACState(flax.struct.PyTreeNode):
     """Everything SAC learns or needs to continue learning (a pytree)."""
 
     actor_params: Params

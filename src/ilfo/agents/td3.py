@@ -190,8 +190,7 @@ def ddpg_config(base: TD3Config | None = None, **overrides: Any) -> TD3Config:
     return dataclasses.replace(cfg, **overrides)
 
 
-@flax.struct.dataclass
-class TD3State:
+class TD3State(flax.struct.PyTreeNode):
     """Everything TD3 learns or needs to continue learning (a pytree)."""
 
     actor_params: Params

@@ -53,7 +53,7 @@ from ilfo.agents._common import (
 )
 from ilfo.agents.critic_targets import TimeAugmentationScheme, augment_time, pal_loss
 from ilfo.agents.td3 import delayed_updates
-from ilfo.networks import dense, ensemble
+from ilfo.networks import ArrayModule, dense, ensemble
 from ilfo.ranges import (
     batch,
     check_fields,
@@ -157,7 +157,7 @@ def _torch_dense(features: int, fan_in: int) -> nn.Dense:
     return dense(features, fan_in, "torch")  # the authors' code is PyTorch's nn.Linear
 
 
-class Encoder(nn.Module):
+class Encoder(ArrayModule):
     """SALE's encoders: ``zs(s)`` (ELU, ELU, linear, AvgL1Norm) and ``zsa(zs, a)`` (ELU, ELU,
     linear)."""
 
@@ -193,7 +193,7 @@ class Encoder(nn.Module):
         return self.zsa(self.zs(obs), action)
 
 
-class Actor(nn.Module):
+class Actor(ArrayModule):
     """(obs, zs) -> tanh(...) in [-1, 1]: ``[AvgL1Norm(W obs), zs]``, ReLU, ReLU, tanh."""
 
     action_dim: int
@@ -208,7 +208,7 @@ class Actor(nn.Module):
         return jnp.tanh(_torch_dense(self.action_dim, x.shape[-1])(x))
 
 
-class _Critic(nn.Module):
+class _Critic(ArrayModule):
     hidden: int
 
     @nn.compact
@@ -221,7 +221,7 @@ class _Critic(nn.Module):
         return _torch_dense(1, x.shape[-1])(x)[..., 0]
 
 
-class CriticEnsemble(nn.Module):
+class CriticEnsemble(ArrayModule):
     """``num_critics`` SALE critics at once: (obs, action, zsa, zs) -> Q (num_critics, ...)."""
 
     hidden: int
@@ -233,8 +233,7 @@ class CriticEnsemble(nn.Module):
         return members(self.hidden, name="ensemble")(obs, action, zsa, zs)
 
 
-@flax.struct.dataclass
-class TD7State:
+class TD7State(flax.struct.PyTreeNode):
     """Everything TD7 learns or needs to continue learning (a pytree)."""
 
     actor_params: Params

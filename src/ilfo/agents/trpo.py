@@ -70,7 +70,7 @@ from ilfo.agents.trust_region import (
     gaussian_kl,
     gaussian_log_prob,
 )
-from ilfo.networks import dense
+from ilfo.networks import ArrayModule, PairModule, dense
 from ilfo.ranges import between, check_fields, count, fraction, non_negative, positive, widths
 
 __all__ = [
@@ -141,8 +141,7 @@ class TRPOConfig:
         check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
 
 
-@flax.struct.dataclass
-class TRPOState:
+class TRPOState(flax.struct.PyTreeNode):
     """Everything TRPO learns (a pytree). No optimiser state: each iteration starts afresh."""
 
     actor_params: Params
@@ -190,7 +189,7 @@ class TRPO(NamedTuple):
     """value(state, obs (..., obs_dim)) -> (...): the value network (for diagnostics)."""
 
 
-class _SmallHeadMLP(nn.Module):
+class _SmallHeadMLP(ArrayModule):
     """ReLU MLP in PyTorch's default initialisation, whose linear output layer starts 10x
     smaller (weights uniform +-0.1/sqrt(fan_in)) with zero biases, as SIL's policy and value
     heads (PyTorch's init, then weight * 0.1 and bias 0)."""
@@ -207,7 +206,7 @@ class _SmallHeadMLP(nn.Module):
         return nn.Dense(self.out_dim, kernel_init=kernel_init, bias_init=nn.initializers.zeros)(x)
 
 
-class GaussianMLPPolicy(nn.Module):
+class GaussianMLPPolicy(PairModule):
     """obs (..., obs_dim) -> (mean, log_std), each (..., action_dim); log_std is one
     state-independent parameter per action dimension (broadcast), not clamped."""
 
@@ -224,7 +223,7 @@ class GaussianMLPPolicy(nn.Module):
         return mean, jnp.broadcast_to(log_std, mean.shape)
 
 
-class ValueMLP(nn.Module):
+class ValueMLP(ArrayModule):
     """obs (..., obs_dim) -> V (...)."""
 
     hidden: Sequence[int]
@@ -455,8 +454,10 @@ def _line_search(
 ) -> tuple[Params, tuple[float, float, float]]:
     """The policy step: the new actor parameters and (fraction, surrogate improvement, KL)
     of the accepted step, or the old parameters and zeros when no step is accepted."""
-    grad, step, s_f_s, *old = fns.policy_direction(state.actor_params, obs_n, action, adv)
-    grad, step, s_f_s = np.asarray(grad), np.asarray(step), float(s_f_s)
+    grad_dev, step_dev, s_f_s_dev, *old = fns.policy_direction(
+        state.actor_params, obs_n, action, adv
+    )
+    grad, step, s_f_s = np.asarray(grad_dev), np.asarray(step_dev), float(s_f_s_dev)
     flat0 = np.asarray(fns.ravel(state.actor_params))
     surrogate_old = float(fns.evaluate(flat0, obs_n, action, adv, *old)[0])
     if not (math.isfinite(s_f_s) and s_f_s > 0):
@@ -489,8 +490,8 @@ def _learn(
     """One TRPO iteration on ``batch`` (whole episodes of the current policy): value fit,
     then the policy step. Deterministic."""
     obs, action, reward, end = _check_batch(batch, obs_dim, action_dim)
-    obs_n, v_old = fns.normalized_values(state, jnp.asarray(obs))
-    v_old = np.asarray(v_old, np.float64)
+    obs_n, v_old_dev = fns.normalized_values(state, jnp.asarray(obs))
+    v_old = np.asarray(v_old_dev, np.float64)
     advantages = gae(reward, v_old, end, cfg.gamma, cfg.gae_lambda)
     target = jnp.asarray((v_old + advantages).astype(np.float32))
     spread = advantages.std(ddof=1)

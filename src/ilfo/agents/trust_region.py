@@ -8,12 +8,13 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-import flax.linen as nn
 import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.signal
 from numpy.typing import ArrayLike
+
+from ilfo.networks import PairModule
 
 Params = Any
 
@@ -38,7 +39,7 @@ def gaussian_kl(
 
 
 def fisher_vector_product(
-    policy: nn.Module,
+    policy: PairModule,
     params: Params,
     obs_n: jax.Array,
     damping: float,

@@ -104,6 +104,7 @@ def _run_reward(args: argparse.Namespace) -> int:
     # None: not given (the OOPS default); PWIL has settings of its own, so these are refused.
     oops_flags = {name: getattr(args, name) for name in ("solver", "metric", "atoms", "reg")}
     given = {name: value for name, value in oops_flags.items() if value is not None}
+    rewarder: OOPS | PWIL
     if args.rewarder == "pwil":
         if given:
             flags = ", ".join(f"--{name}" for name in given)

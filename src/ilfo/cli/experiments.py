@@ -306,11 +306,11 @@ def _run_sweep_create(args: argparse.Namespace) -> int:
     root = Path(args.dir)
     spec = _spec_from_args(args, root, list(args.rest))
     if spec is None:
-        there = (root / MANIFEST_FILE).is_file()
+        holds_sweep = (root / MANIFEST_FILE).is_file()
         raise ValueError(
             "nothing to create: give --spec FILE, the axis flags (--env, --algo, --num-demos, "
             "--seeds) or `ilfo train` flags (the axes' defaults apply)"
-            + (f"; {root} holds a sweep already: ilfo sweep status {root}" if there else "")
+            + (f"; {root} holds a sweep already: ilfo sweep status {root}" if holds_sweep else "")
         )
     before = matching_sweep(root, spec)  # another sweep there is refused
     sweep = create_sweep(root, spec)

@@ -46,7 +46,7 @@ def _add_train_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     for name, part in {**AGENT_PARTS, **REWARD_PARTS}.items():
         algos = ", ".join(algos_using(name))
-        presets = _preset_defaults(part) if name in AGENT_PARTS else None
+        presets = _preset_defaults(AGENT_PARTS[name]) if name in AGENT_PARTS else None
         overrides = "; overrides the --preset" if presets else ""
         group = p.add_argument_group(f"{part.title} ({algos}{overrides})", part.description)
         add_dataclass_arguments(

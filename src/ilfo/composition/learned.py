@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import flax
 import jax
@@ -26,6 +26,7 @@ from ilfo.replay import ReplayData
 from ilfo.rewards.learned import (
     LearnedReward,
     RewardSchedule,
+    RolloutLearnedReward,
     Transitions,
     env_observations,
     reward_steps,
@@ -42,8 +43,7 @@ class RolloutPlan(NamedTuple):
     episodes: int
 
 
-@flax.struct.dataclass
-class LearnedRewardState:
+class LearnedRewardState(flax.struct.PyTreeNode):
     """The composed agent's state (a pytree): the agent's, the reward's, and a key for drawing
     batches. Reads like an agent state where the loop needs one (the policy, the normaliser)."""
 
@@ -98,7 +98,7 @@ class LearnedRewardAgent(NamedTuple):
 class LearnedRewardSetup(NamedTuple):
     """What an agent trained on a learned reward is built with (``ilfo.training.build``)."""
 
-    reward: LearnedReward
+    reward: LearnedReward | RolloutLearnedReward
     schedule: RewardSchedule | None
     """When the reward takes its gradient steps on replay and expert batches; None: never
     (a reward that learns from rollouts)."""
@@ -124,8 +124,10 @@ def with_learned_reward(agent: TD3 | SAC, setup: LearnedRewardSetup) -> LearnedR
     reward, time_feature = setup.reward, setup.time_feature
     update_step = functools.partial(_update_step, agent, reward, time_feature)
     agent_updates = functools.partial(_agent_updates, agent, update_step)
+    # Called only where a schedule is set, which only rewards that learn by update have.
+    batch_learned = cast(LearnedReward, reward)
     reward_steps_jit = jax.jit(
-        functools.partial(reward_steps, reward, time_feature), static_argnames="num_steps"
+        functools.partial(reward_steps, batch_learned, time_feature), static_argnames="num_steps"
     )
     return LearnedRewardAgent(
         obs_dim=agent.obs_dim,
@@ -148,7 +150,7 @@ def with_learned_reward(agent: TD3 | SAC, setup: LearnedRewardSetup) -> LearnedR
 
 
 def _init(
-    agent: TD3 | SAC, reward: LearnedReward, expert: Transitions, seed: int
+    agent: TD3 | SAC, reward: LearnedReward | RolloutLearnedReward, expert: Transitions, seed: int
 ) -> LearnedRewardState:
     key, k_reward = jax.random.split(jax.random.fold_in(jax.random.PRNGKey(seed), 1))
     return LearnedRewardState(
@@ -161,7 +163,7 @@ def _init(
 
 def _update_step(
     agent: TD3 | SAC,
-    reward: LearnedReward,
+    reward: LearnedReward | RolloutLearnedReward,
     time_feature: bool,
     state: LearnedRewardState,
     batch: ReplayData,
@@ -219,11 +221,12 @@ def _rollout_learning(
     setup: LearnedRewardSetup,
 ) -> Callable[..., tuple[LearnedRewardState, dict[str, jax.Array]]]:
     """``learn_from_rollouts`` of a reward that learns from the policy's episodes."""
-    reward = setup.reward
+    # Built only where setup.rollouts is set, which only such rewards (f-IRL's) have.
+    reward = cast(RolloutLearnedReward, setup.reward)
 
     def learn(state: LearnedRewardState, trajectories: jax.Array, expert_trajs: jax.Array):
         key, k_reward = jax.random.split(state.key)
-        reward_state, metrics = reward.update_from_rollouts(  # type: ignore[attr-defined]
+        reward_state, metrics = reward.update_from_rollouts(
             state.reward, trajectories, expert_trajs, k_reward
         )
         return state.replace(reward=reward_state, key=key), metrics

@@ -116,8 +116,7 @@ class OPOLOConfig:
         return cls(**{"lr": 1e-4, "alpha": 0.01, "pi_reg_coef": 0.01, **overrides})
 
 
-@flax.struct.dataclass
-class OPOLOState:
+class OPOLOState(flax.struct.PyTreeNode):
     """Everything OPOLO learns (a pytree): actor, critics and targets, the inverse dynamics
     model, the reward's (discriminator's) state, the normaliser, counters and a key."""
 

@@ -129,7 +129,8 @@ def save(
     tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")  # one per writing process
     try:
         with open(tmp, "wb") as file:  # a file object: numpy adds no suffix
-            np.savez_compressed(file, **arrays)
+            # numpy's stubs let **arrays fill allow_pickle (a bool); these keys are array names.
+            np.savez_compressed(file, **arrays)  # type: ignore[arg-type]
         os.replace(tmp, target)
     except OSError as err:  # a full disk: the message names the file (ilfo.cli prints it)
         if err.filename is not None:

@@ -61,7 +61,8 @@ _FOOT_FRICTION_RANGE = (0.8, 1.5)
 
 def _stand_ins() -> dict[str, types.ModuleType]:
     """Just enough of old ``gym`` and of ``pkg_resources`` for the Minitaur files to import."""
-    gym_mod = types.ModuleType("gym")
+    # Any: modules built here, whose attributes the type checker cannot know.
+    gym_mod: Any = types.ModuleType("gym")
     gym_mod.__version__ = "0.26.2"  # only compared with 0.9.6, to skip pre-0.9.6 aliases
 
     class Env:  # the original classes' base; the adapter below supplies gymnasium's API
@@ -71,14 +72,14 @@ def _stand_ins() -> dict[str, types.ModuleType]:
         return types.SimpleNamespace(low=np.asarray(low), high=np.asarray(high), dtype=dtype)
 
     gym_mod.Env = Env
-    spaces_mod = types.ModuleType("gym.spaces")
+    spaces_mod: Any = types.ModuleType("gym.spaces")
     spaces_mod.Box = box
-    utils_mod = types.ModuleType("gym.utils")
-    seeding_mod = types.ModuleType("gym.utils.seeding")
+    utils_mod: Any = types.ModuleType("gym.utils")
+    seeding_mod: Any = types.ModuleType("gym.utils.seeding")
     seeding_mod.np_random = seeding.np_random
     utils_mod.seeding = seeding_mod
     gym_mod.spaces, gym_mod.utils = spaces_mod, utils_mod
-    pkg_resources = types.ModuleType("pkg_resources")
+    pkg_resources: Any = types.ModuleType("pkg_resources")
     pkg_resources.parse_version = lambda v: tuple(int(p) for p in v.split(".")[:3])
     return {
         "gym": gym_mod,
@@ -111,8 +112,9 @@ def _minitaur_modules() -> tuple[types.ModuleType, types.ModuleType]:
     sys.modules.update(stand_ins)
     sys.modules[_PACKAGE] = package
     try:
-        plain = importlib.import_module(f"{_PACKAGE}.minitaur_gym_env")
-        duck = importlib.import_module(f"{_PACKAGE}.minitaur_duck_gym_env")
+        # Any: modules loaded by name, whose attributes the type checker cannot know.
+        plain: Any = importlib.import_module(f"{_PACKAGE}.minitaur_gym_env")
+        duck: Any = importlib.import_module(f"{_PACKAGE}.minitaur_duck_gym_env")
     except ImportError as err:
         raise ImportError(f"cannot load PyBullet's Minitaur ({err}). {INSTALL_HINT}") from err
     finally:
@@ -123,7 +125,7 @@ def _minitaur_modules() -> tuple[types.ModuleType, types.ModuleType]:
             else:
                 sys.modules[name] = module
     pybullet = importlib.import_module("pybullet")
-    bullet_client = importlib.import_module("pybullet_utils.bullet_client")
+    bullet_client: Any = importlib.import_module("pybullet_utils.bullet_client")
 
     class DirectClient(bullet_client.BulletClient):  # pybullet_utils' client, always headless
         def __init__(self, *args: Any, **kwargs: Any) -> None:
@@ -135,10 +137,10 @@ def _minitaur_modules() -> tuple[types.ModuleType, types.ModuleType]:
             if self._client < 0:
                 raise RuntimeError("pybullet could not start a DIRECT physics client")
 
-    for module in (plain, duck):
+    for minitaur_module in (plain, duck):
         # Only these private copies are patched: headless, and no "urdf_root=..." print.
-        module.bc = types.SimpleNamespace(BulletClient=DirectClient)
-        module.print = lambda *args, **kwargs: None
+        minitaur_module.bc = types.SimpleNamespace(BulletClient=DirectClient)
+        minitaur_module.print = lambda *args, **kwargs: None
     return plain, duck
 
 
@@ -165,7 +167,11 @@ class _MinitaurAdapter(gym.Env):
     """A gymnasium environment around one of ``pybullet_envs``' Minitaur environments."""
 
     # A step is 0.01 s of physics (5 substeps of 2 ms): 100 frames a second in real time.
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 100}
+    # gymnasium annotates Env.metadata as an instance attribute, though it is class data.
+    metadata: ClassVar[dict[str, Any]] = {  # type: ignore[misc]
+        "render_modes": ["rgb_array"],
+        "render_fps": 100,
+    }
     _duck: ClassVar[bool] = False
 
     def __init__(self, render_mode: str | None = None) -> None:

@@ -12,12 +12,16 @@
 
 from __future__ import annotations
 
-from typing import Any, SupportsFloat
+from typing import Any, SupportsFloat, overload
 
 import gymnasium as gym
 import numpy as np
 
 
+@overload
+def time_feature(t: int, horizon: int) -> float: ...
+@overload
+def time_feature(t: np.ndarray, horizon: int) -> np.ndarray: ...
 def time_feature(t: int | np.ndarray, horizon: int) -> float | np.ndarray:
     """The time feature at step ``t`` (0 at the first observation) of a ``horizon``-step
     episode: the fraction of the episode still to go, 1 at the start and 0 at the end."""

@@ -14,10 +14,14 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from ilfo.rewards import OOPSConfig
+
+if TYPE_CHECKING:
+    from gymnasium.spaces import Box
 
 PAPER_NOISE_LEVELS: tuple[float, ...] = tuple(round(0.1 * k, 1) for k in range(16))
 """The paper's range of l, in steps of 0.1."""
@@ -74,7 +78,8 @@ def calibrate(
     rewarder = OOPS([reward_view(demo)], oops or OOPSConfig())
     steps = horizon or expert.horizon
     env = make_env(env_id, fixed_horizon=True, horizon=steps)
-    low, high = env.action_space.low, env.action_space.high
+    actions = cast("Box", env.action_space)  # make_env's environments act in a Box
+    low, high = actions.low, actions.high
     act_expert = expert.agent.functions.act
 
     def act(kind: float | str, obs: np.ndarray, t: int, rng: np.random.Generator) -> np.ndarray:
@@ -90,7 +95,8 @@ def calibrate(
 
     points = []
     try:
-        for kind in (*noise_levels, "zero", "random"):
+        kinds: tuple[float | str, ...] = (*noise_levels, "zero", "random")
+        for kind in kinds:
             rng = np.random.default_rng(0)
             for k in range(episodes):
                 obs, _ = env.reset(seed=100 + k)
@@ -204,7 +210,7 @@ def write_calibration(results: dict[str, list[CalibrationPoint]], out: Path) -> 
         scatter = ax.scatter(
             [p.task_score for p in noisy],
             [p.proxy_return for p in noisy],
-            c=[p.noise for p in noisy],
+            c=cast(list[float], [p.noise for p in noisy]),  # noisy: the points with a noise
             cmap="viridis",
         )
         fig.colorbar(scatter, ax=ax, label="action noise l")

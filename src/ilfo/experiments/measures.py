@@ -154,10 +154,15 @@ def write_distances(
         per_cell.setdefault((run.env, run.algo, run.num_demos), []).append(values)
     paper = {(c.env, c.algo, c.space): c for c in paper_cells() if c.table == "table3"}
     rows = []
-    for (env, algo, demos), values in per_cell.items():
-        row: dict[str, Any] = {"env": env, "algo": algo, "num_demos": demos, "seeds": len(values)}
+    for (env, algo, demos), cell_values in per_cell.items():
+        row: dict[str, Any] = {
+            "env": env,
+            "algo": algo,
+            "num_demos": demos,
+            "seeds": len(cell_values),
+        }
         for space in SPACES:
-            row[space] = float(np.mean([v[space] for v in values]))
+            row[space] = float(np.mean([v[space] for v in cell_values]))
             cell = paper.get((env, algo, space))
             row[f"paper {space}"] = None if cell is None else cell.mean
         rows.append(row)

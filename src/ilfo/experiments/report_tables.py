@@ -9,6 +9,7 @@ import math
 from collections.abc import Sequence
 from datetime import date
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -16,6 +17,9 @@ from ilfo.experiments import stats
 from ilfo.experiments.report import STRONG_EXPERT, TABLE4_ALGOS, Cell, Report
 from ilfo.experiments.report_figures import plot_curves, plot_profiles, profile_lines
 from ilfo.paper import paper_ablation
+
+Row = dict[str, Any]
+"""A table row: column name -> value (text, a number, or None for none)."""
 
 
 def _fmt(value: float | None, digits: int = 2) -> str:
@@ -31,14 +35,14 @@ def _seeds_text(cell: Cell) -> str:
     return text
 
 
-def aggregate_rows(report: Report) -> list[dict[str, object]]:
+def aggregate_rows(report: Report) -> list[Row]:
     """Per algo x demos x variant: the IQM of all its tasks' runs, the mean and the median of
     its tasks' mean runs, each with a 95% stratified-bootstrap interval."""
     rows = []
     for algo, num_demos, variant in report.groups():
         envs = report.envs_of(algo, num_demos, variant)
         scores = report.task_scores(algo, num_demos, variant, envs)
-        row: dict[str, object] = {
+        row: Row = {
             "algo": algo,
             "num_demos": num_demos,
             "variant": variant or "",
@@ -58,7 +62,7 @@ def aggregate_rows(report: Report) -> list[dict[str, object]]:
     return rows
 
 
-def improvement_rows(report: Report) -> list[dict[str, object]]:
+def improvement_rows(report: Report) -> list[Row]:
     """P(X > Y) for each pair of algos (no variant) with the same demos, on their shared
     tasks, with a 95% stratified-bootstrap interval."""
     rows = []
@@ -111,7 +115,7 @@ def _versus_paper_text(cell: Cell) -> str:
     return verdict
 
 
-def cell_rows(report: Report) -> list[dict[str, object]]:
+def cell_rows(report: Report) -> list[Row]:
     """One row per cell: ilfo's statistics beside the paper's number."""
     rows = []
     for c in report.cells:
@@ -177,7 +181,7 @@ def write_report(report: Report, out: str | Path, *, sources: Sequence[str] = ()
     return [path, *written, *figures]
 
 
-def _write_csv(path: Path, rows: list[dict[str, object]]) -> Path:
+def _write_csv(path: Path, rows: list[Row]) -> Path:
     with path.open("w", newline="") as f:
         if rows:
             writer = csv.DictWriter(f, fieldnames=list(rows[0]))
@@ -203,7 +207,7 @@ def _header_lines(report: Report, sources: Sequence[str]) -> list[str]:
     ]
 
 
-def _final_performance_lines(report: Report, cells: list[dict[str, object]]) -> list[str]:
+def _final_performance_lines(report: Report, cells: list[Row]) -> list[str]:
     lines = [
         "",
         "## Final performance",
@@ -260,7 +264,7 @@ def _variant_lines(report: Report) -> list[str]:
     return lines
 
 
-def _aggregate_lines(aggregates: list[dict[str, object]]) -> list[str]:
+def _aggregate_lines(aggregates: list[Row]) -> list[str]:
     lines = [
         "",
         "## Aggregates over tasks",
@@ -281,7 +285,7 @@ def _aggregate_lines(aggregates: list[dict[str, object]]) -> list[str]:
     return lines
 
 
-def _improvement_lines(improvements: list[dict[str, object]]) -> list[str]:
+def _improvement_lines(improvements: list[Row]) -> list[str]:
     if not improvements:
         return []
     lines = [

@@ -599,7 +599,7 @@ def _metrics_rate(run_dir: Path, tail_bytes: int = 16384) -> float | None:
 
 def summary(statuses: Sequence[RunStatus]) -> dict[str, int]:
     """Counts of runs by state, and steps done and in all."""
-    counts = {state: 0 for state in RUN_STATES}
+    counts: dict[str, int] = {state: 0 for state in RUN_STATES}
     for status in statuses:
         counts[status.state] += 1
     counts["steps_done"] = sum(s.steps if s.state == "done" else s.step for s in statuses)

@@ -13,6 +13,7 @@ from ilfo.rewards.discriminator import Discriminator, DiscriminatorConfig, Discr
 from ilfo.rewards.firl import FIRL, FIRLConfig, FIRLState, fkl_surrogate
 from ilfo.rewards.learned import (
     LearnedReward,
+    RolloutLearnedReward,
     Transitions,
     expert_transitions,
     sample_transitions,
@@ -35,6 +36,7 @@ __all__ = [
     "PWILConfig",
     "RewardOutput",
     "RewardState",
+    "RolloutLearnedReward",
     "Standardizer",
     "Transitions",
     "expert_transitions",

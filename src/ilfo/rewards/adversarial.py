@@ -81,8 +81,7 @@ def cosine_cost(x: jax.Array, y: jax.Array, eps: float = COSINE_EPS) -> jax.Arra
     return jnp.clip(1.0 - cos, 0.0, 2.0)
 
 
-@flax.struct.dataclass
-class CriticState:
+class CriticState(flax.struct.PyTreeNode):
     """The critic's parameters and Adam state (a pytree)."""
 
     params: Any
@@ -126,10 +125,12 @@ class AdversarialCritic:
         cost = _cost_jit(self._net, params, _pad(x), _pad(y))
         return np.asarray(cost, dtype=np.float64)[: len(x), : len(y)]
 
-    def loss(self, params: Any, pairs: Sequence[Pair]) -> jax.Array:
+    def loss(self, params: Any, pairs: Sequence[Pair]) -> jax.Array | float:
         """The critic's loss, -(1 / max(N - 1, 1)) sum_n <stop_gradient(P_n), C_n(params)>,
-        as one differentiable expression (no padding, no jit: a reference for tests)."""
-        dtype, total = _dtype(params), 0.0
+        as one differentiable expression (no padding, no jit: a reference for tests); 0.0 for
+        no pairs."""
+        dtype = _dtype(params)
+        total: jax.Array | float = 0.0
         for learner, expert, plan in pairs:
             x, y = jnp.asarray(learner, dtype), jnp.asarray(expert, dtype)
             cost = _cost_fn(self._net, params, x, y)

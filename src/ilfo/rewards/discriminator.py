@@ -64,8 +64,7 @@ class DiscriminatorConfig:
         check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
 
 
-@flax.struct.dataclass
-class DiscriminatorState:
+class DiscriminatorState(flax.struct.PyTreeNode):
     """The discriminator's parameters, optimiser state and input statistics (a pytree)."""
 
     params: Any

@@ -33,7 +33,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from ilfo.networks import dense
+from ilfo.networks import ArrayModule, dense
 from ilfo.ranges import (
     batch,
     check_fields,
@@ -90,7 +90,7 @@ class FIRLConfig:
         check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)
 
 
-class RewardNet(nn.Module):
+class RewardNet(ArrayModule):
     """r_theta(s) in the code's layout (see ``FIRLConfig.reward_hidden``), PyTorch init."""
 
     hidden: tuple[int, ...]
@@ -104,7 +104,7 @@ class RewardNet(nn.Module):
         return jnp.clip(dense(1, x.shape[-1], "torch")(x)[..., 0], -self.clip, self.clip)
 
 
-class DensityRatioNet(nn.Module):
+class DensityRatioNet(ArrayModule):
     """The discriminator's logit, ~log rho_E(s) / rho_theta(s) (see ``FIRLConfig.disc_blocks``)."""
 
     width: int
@@ -131,8 +131,7 @@ def fkl_surrogate(log_ratio: jax.Array, rewards: jax.Array) -> jax.Array:
     return (jnp.mean(a * b) - jnp.mean(a) * jnp.mean(b)) / rewards.shape[-1]
 
 
-@flax.struct.dataclass
-class FIRLState:
+class FIRLState(flax.struct.PyTreeNode):
     """The reward network and the discriminator, with their optimiser states (a pytree)."""
 
     reward_params: Any

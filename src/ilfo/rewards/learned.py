@@ -93,6 +93,25 @@ class LearnedReward(Protocol):
         ...
 
 
+class RolloutLearnedReward(Protocol):
+    """A learned reward that learns from fresh episodes of the policy (f-IRL) rather than by
+    ``update`` on replay batches: its part has a ``rollouts`` plan and no schedule.
+    ``batch_size``, ``init`` and ``reward`` are ``LearnedReward``'s."""
+
+    batch_size: int
+
+    def init(self, key: jax.Array, expert: Transitions) -> Any: ...
+
+    def reward(self, state: Any, obs: jax.Array, next_obs: jax.Array) -> jax.Array: ...
+
+    def update_from_rollouts(
+        self, state: Any, agent_trajs: jax.Array, expert_trajs: jax.Array, key: jax.Array
+    ) -> tuple[Any, dict[str, jax.Array]]:
+        """One learning step from the policy's episodes and the expert's, both (n, T, obs_dim);
+        returns the new state and scalar metrics."""
+        ...
+
+
 class RewardSchedule(NamedTuple):
     """When the reward learns: ``steps`` gradient steps each time the agent's update count
     crosses a multiple of ``every`` (taken before the agent's updates of that call)."""

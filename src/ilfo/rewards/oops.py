@@ -215,5 +215,6 @@ class OOPS:
             init = None
         result = solve(cost, cfg.solver, reg=cfg.reg, tol=cfg.tol, max_iter=cfg.max_iter, init=init)
         if cfg.warm_start and cfg.solver == "sinkhorn" and result.converged:
+            assert result.f is not None and result.g is not None  # Sinkhorn's potentials
             self._potentials[key] = (result.f, result.g)
         return result

@@ -89,13 +89,16 @@ def env_info(env: gym.Env, env_id: str) -> EnvInfo:
                 f"{env_id} has a {type(space).__name__} {what} space ({space}): ilfo's agents "
                 f"need a gymnasium Box of {what}s (continuous control, e.g. Hopper-v5)"
             )
+    assert isinstance(act_space, gym.spaces.Box) and isinstance(obs_space, gym.spaces.Box)  # above
     high = np.asarray(act_space.high)
     symmetric = np.allclose(high, -np.asarray(act_space.low)) and np.allclose(high, high.flat[0])
     if not symmetric or not np.all(np.isfinite(high)):
         raise ValueError(f"{env_id}: actions must lie in a finite symmetric box [-a, a]")
+    spec = env.spec  # gymnasium.make's, with the registered time limit
+    assert spec is not None and spec.max_episode_steps is not None
     return EnvInfo(
-        horizon=int(env.spec.max_episode_steps),
-        obs_dim=int(np.prod(env.observation_space.shape)),
+        horizon=int(spec.max_episode_steps),
+        obs_dim=int(np.prod(obs_space.shape)),
         action_dim=int(np.prod(act_space.shape)),
         max_action=float(high.flat[0]),
     )
@@ -220,7 +223,9 @@ def make_agent(config: TrainConfig, env: EnvInfo, demos: Sequence[np.ndarray] | 
     dims = (env.obs_dim + int(time_feature), env.action_dim, env.max_action)
     agent_config = config.agent_config(env.horizon)
     if not algo.learned:
+        assert part.make is not None  # None only for agents that need a learned reward
         return Agent(part.make(agent_config, *dims), time_feature)
+    assert algo.reward is not None  # a learned reward's recipe names it
     reward_part = REWARD_PARTS[algo.reward]
     assert isinstance(reward_part, LearnedRewardPart) and part.make_learning is not None
     reward_config = config.part_config(algo.reward)

@@ -137,7 +137,8 @@ def _write_files(run_dir: Path, tmp: Path, ckpt: Checkpoint) -> None:
     reward = ckpt.reward_state
     if reward is not None and reward.arrays:
         with naming(tmp / REWARD_ARRAYS_FILE):
-            np.savez(tmp / REWARD_ARRAYS_FILE, **reward.arrays)
+            # numpy's stubs let **arrays fill allow_pickle (a bool); these keys are array names.
+            np.savez(tmp / REWARD_ARRAYS_FILE, **reward.arrays)  # type: ignore[arg-type]
     for name in BEST_FILES:  # see restore_best_policy
         if (Path(run_dir) / name).is_file():
             with naming(tmp / name):
@@ -285,7 +286,10 @@ def snapshot_run(run_dir: str | Path, out: str | Path) -> Path:
             shutil.copytree(checkpoint, target)
         else:
             shutil.copytree(checkpoint, target, ignore=shutil.ignore_patterns(REPLAY_FILE))
-            omitted = {"left_out": REPLAY_FILE, "from": str(run_dir.resolve() / CHECKPOINTS_DIR)}
+            omitted: dict[str, str | int] = {
+                "left_out": REPLAY_FILE,
+                "from": str(run_dir.resolve() / CHECKPOINTS_DIR),
+            }
             if (checkpoint / REPLAY_FILE).is_file():
                 omitted["bytes"] = (checkpoint / REPLAY_FILE).stat().st_size
             (target / REPLAY_OMITTED).write_text(json.dumps(omitted))

@@ -8,7 +8,7 @@ import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from ilfo.agents import SACConfig, TD3Config
 from ilfo.agents.td7 import TD7Config
@@ -61,8 +61,12 @@ def part_flag(part: str, setting: str) -> str | None:
     return flag_name(setting, part)
 
 
-Algo = Literal[tuple(ALGOS)]  # type: ignore[valid-type]
-"""The names of ``ilfo.algos.ALGOS``, made from the registry (the CLI's ``--algo`` choices)."""
+if TYPE_CHECKING:  # a type checker cannot build a Literal from the registry: any name to it
+    Algo = str
+else:
+    Algo = Literal[tuple(ALGOS)]
+    """The names of ``ilfo.algos.ALGOS``, made from the registry (the CLI's ``--algo``
+    choices)."""
 
 
 @dataclass(frozen=True)
@@ -286,7 +290,7 @@ class TrainConfig:
         None. What a run's config.json records, so that it shows every setting and builds the
         same run even if presets change."""
         algo = self.recipe
-        parts = dict.fromkeys(PART_CONFIGS)
+        parts: dict[str, Any] = dict.fromkeys(PART_CONFIGS)
         parts[algo.agent] = self.agent_config(horizon)
         if algo.reward is not None:
             parts[algo.reward] = self.part_config(algo.reward)
@@ -331,7 +335,7 @@ def imitation_drops_contact_forces(env_id: str, contact_forces: bool | None) -> 
 def preset_changes_agent(config: TrainConfig, horizon: int = 1000) -> bool:
     """Whether the other ``preset`` would build ``config``'s agent otherwise (TD3 and DDPG's
     network sizes; not SAC, OPOLO, or the baselines' authors' settings)."""
-    other = "fast" if config.preset == "paper" else "paper"
+    other: Literal["paper", "fast"] = "fast" if config.preset == "paper" else "paper"
     return config.agent_config(horizon) != dataclasses.replace(config, preset=other).agent_config(
         horizon
     )

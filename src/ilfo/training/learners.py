@@ -175,7 +175,9 @@ def updates(trainer: Trainer, num_updates: int) -> tuple[Any, dict[str, float]]:
     reward reports its own only from chunks in which it took steps).
     """
     update = trainer.agent.functions.update  # type: ignore[union-attr]
-    state, totals, weights = trainer.state, {}, {}
+    state = trainer.state
+    totals: dict[str, float] = {}
+    weights: dict[str, int] = {}
     remaining, chunk = num_updates, 1 << (num_updates.bit_length() - 1)
     while remaining:
         if chunk <= remaining:
@@ -224,7 +226,8 @@ def learner_of(config: TrainConfig, functions: Any) -> Learner:
         learns_per_batch = isinstance(part, RewardPart) and part.learns_per_batch
         return OnPolicyBatches(functions.batch_steps, learns_per_batch)
     if recipe.learner == "learned_reward":
-        assert isinstance(part, LearnedRewardPart)  # what makes a recipe's learner this kind
+        # What makes a recipe's learner this kind.
+        assert recipe.reward is not None and isinstance(part, LearnedRewardPart)
         plan = None if part.rollouts is None else part.rollouts(config.part_config(recipe.reward))
         return LearnedReward(functions, plan)
     return OffPolicy()
