@@ -1,6 +1,6 @@
 """TD7's policy checkpoints (Fujimoto et al., NeurIPS 2023, "For SALE", its policy
 checkpoints; the authors' ``maybe_train_and_checkpoint`` in sfujim/TD7) as bookkeeping between
-episodes: no JAX, no loop.
+episodes, without the loop.
 
 A run evaluates a *checkpoint* policy rather than the policy as trained, which may have just
 taken a bad step. The current policy is assessed on its own training episodes while its
@@ -29,9 +29,11 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
+import jax
+
 from ilfo.agents._common import Policy, policy_of
 
-__all__ = ["CheckpointSchedule", "PolicyCheckpoint", "evaluation_policy"]
+__all__ = ["CheckpointSchedule", "PolicyCheckpoint", "canonical", "evaluation_policy"]
 
 
 class CheckpointSchedule(NamedTuple):
@@ -107,3 +109,11 @@ def evaluation_policy(checkpoint: PolicyCheckpoint | None, state: Any) -> Policy
     if checkpoint is not None and checkpoint.policy is not None:
         return checkpoint.policy
     return policy_of(state)
+
+
+def canonical(policy: Policy) -> Policy:
+    """``policy`` with its dicts in sorted key order (the same arrays): a checkpoint policy
+    taken from the agent's state (in the order its update left) and one read back from a
+    file (in its template's) then save as the same bytes, so that a resumed run's policy files
+    are the uninterrupted run's."""
+    return jax.tree.map(lambda leaf: leaf, policy)

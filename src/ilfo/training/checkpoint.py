@@ -29,7 +29,7 @@ import flax.serialization
 import numpy as np
 
 from ilfo.agents import policy_of
-from ilfo.agents.policy_checkpoints import PolicyCheckpoint
+from ilfo.agents.policy_checkpoints import PolicyCheckpoint, canonical
 from ilfo.algos import AGENT_PARTS, ALGOS
 from ilfo.files import check_new_copy_dir, load_msgpack, load_npz, naming, sync_dir, sync_tree
 from ilfo.replay import ReplayBuffer
@@ -275,7 +275,7 @@ def load_checkpoint(
     agent_state = load_msgpack(agent_template, ckpt / "agent.msgpack", "agent checkpoint")
     if policy_checkpoint is not None and policy_file is not None:
         policy = load_msgpack(policy_of(agent_template), ckpt / policy_file, "checkpoint policy")
-        policy_checkpoint = dataclasses.replace(policy_checkpoint, policy=policy)
+        policy_checkpoint = dataclasses.replace(policy_checkpoint, policy=canonical(policy))
     loop = dataclasses.replace(loop, policy_checkpoint=policy_checkpoint)
     buffer = None
     omitted = not (ckpt / REPLAY_FILE).is_file() and (ckpt / REPLAY_OMITTED).is_file()

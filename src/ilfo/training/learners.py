@@ -30,7 +30,7 @@ import numpy as np
 
 from ilfo.agents import policy_of
 from ilfo.agents.base import OnPolicyBatch
-from ilfo.agents.policy_checkpoints import CheckpointSchedule, PolicyCheckpoint
+from ilfo.agents.policy_checkpoints import CheckpointSchedule, PolicyCheckpoint, canonical
 from ilfo.algos import AGENT_PARTS, REWARD_PARTS, LearnedRewardPart, RewardPart
 from ilfo.composition.learned import RolloutPlan
 from ilfo.training.config import TrainConfig
@@ -149,7 +149,7 @@ class PolicyCheckpoints(OffPolicy):
         if not updating:
             return {}
         checkpoint = trainer.loop_state.policy_checkpoint or PolicyCheckpoint()
-        current = policy_of(trainer.state)
+        current = canonical(policy_of(trainer.state))
         checkpoint, due = checkpoint.end_episode(episode_return, num_steps, current, self.schedule)
         metrics: dict[str, float] = {}
         if due:
