@@ -177,12 +177,33 @@ def test_a_task_reward_record_with_demos_reads_back_without_them():
     assert upgrade_run_config(imitation, "config.json")["demos"] == DEMOS
 
 
+def test_a_td7_record_of_format_1_reads_without_policy_checkpoints():
+    """TD7 evaluated the policy as trained before its policy checkpoints (format 2, on by
+    default): its older records, and a sweep's runs left to the preset, read with them off."""
+    from ilfo.agents.td7 import TD7Config
+
+    for algo in ("td7", "oops-td7"):
+        record = {**dataclasses.asdict(TrainConfig(algo=algo).resolved(1000)), "format": 1}
+        del record["td7"]["policy_checkpoints"]
+        assert not config_from_dict(upgrade_run_config(record, "c"), "c").td7.policy_checkpoints
+        sweep_run = {**dataclasses.asdict(TrainConfig(algo=algo, preset="fast")), "format": 1}
+        sweep_td7 = config_from_dict(upgrade_sweep_run_config(sweep_run, "s"), "s").td7
+        assert sweep_td7 == TD7Config.fast(policy_checkpoints=False)
+    today = config_record(dataclasses.asdict(TrainConfig(algo="td7")))
+    assert (
+        config_from_dict(upgrade_run_config(today, "c"), "c").part_config("td7").policy_checkpoints
+    )
+    td3 = {**dataclasses.asdict(TrainConfig(algo="td3")), "format": 1}
+    assert upgrade_run_config(td3, "c") == {k: v for k, v in td3.items() if k != "format"}
+
+
 def test_records_of_todays_format_read_back_as_written_and_newer_ones_are_refused():
     settings = dataclasses.asdict(TrainConfig(algo="pwil-td3"))  # fixed_horizon None
     record = config_record(settings)
     assert record["format"] == CONFIG_FORMAT
     assert upgrade_run_config(record, "config.json") == settings  # no step: None stays
-    with pytest.raises(ValueError, match=r"config.json: format 2, not one this ilfo reads"):
+    newer = CONFIG_FORMAT + 1
+    with pytest.raises(ValueError, match=rf"config.json: format {newer}, not one this ilfo reads"):
         upgrade_run_config({**settings, "format": CONFIG_FORMAT + 1}, "config.json")
     with pytest.raises(ValueError, match=r"state.json: schema 3, not one this ilfo reads"):
         upgrade_checkpoint_state({"schema": CHECKPOINT_FORMAT + 1}, (), "state.json")

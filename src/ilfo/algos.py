@@ -24,6 +24,7 @@ from typing import Any, Literal
 import numpy as np
 
 from ilfo.agents import SACConfig, TD3Config, ddpg_config, make_sac, make_td3
+from ilfo.agents.policy_checkpoints import CheckpointSchedule
 from ilfo.agents.td7 import TD7Config, make_td7
 from ilfo.agents.trpo import TRPOConfig, make_trpo
 from ilfo.composition.opolo import OPOLOConfig, make_opolo
@@ -77,6 +78,10 @@ class AgentPart(Part):
     on_policy: bool = False
     """Whether it learns from batches of its own fresh episodes (TRPO), not from a replay
     buffer: ``TrainConfig.updates_per_step`` does not apply to it."""
+    policy_checkpoints: Callable[[Any], CheckpointSchedule | None] | None = None
+    """``policy_checkpoints(config)`` -> the schedule of the policy checkpoints it is evaluated
+    with (TD7's: ``ilfo.agents.policy_checkpoints``), None where its config turns them off;
+    None: it has none."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -175,6 +180,16 @@ def _td7_for_run(config: TD7Config, horizon: int, fixed_horizon: bool) -> TD7Con
     )
 
 
+def _td7_checkpoints(config: TD7Config) -> CheckpointSchedule | None:
+    if not config.policy_checkpoints:
+        return None
+    return CheckpointSchedule(
+        config.checkpoint_max_episodes,
+        config.checkpoint_early_updates,
+        config.checkpoint_reset_weight,
+    )
+
+
 def _sac_learning(config: SACConfig, obs_dim: int, action_dim: int, max_action: float, setup):
     from ilfo.composition.learned import with_learned_reward
 
@@ -235,12 +250,15 @@ AGENT_PARTS: dict[str, AgentPart] = {
         make=make_td7,
         default=lambda preset: TD7Config() if preset == "paper" else TD7Config.fast(),
         for_run=_td7_for_run,
+        policy_checkpoints=_td7_checkpoints,
         title="TD7 agent",
         description=(
             "Defaults: --preset paper is the TD7 authors' (sfujim/TD7: widths 256, batch 256), "
             "fast is every width 128 and batch 100 (one CPU core); LAP as its uniform-sampling "
-            "equivalent, the PAL loss. Set by the trainer: max_time (the episode horizon); "
-            "time augmentation applies only in fixed-horizon runs."
+            "equivalent, the PAL loss; evaluations of the authors' policy checkpoints "
+            "(--no-td7-policy-checkpoints: of the policy as trained). Set by the trainer: "
+            "max_time (the episode horizon); time augmentation applies only in fixed-horizon "
+            "runs."
         ),
         set_by_trainer=("max_time",),
     ),

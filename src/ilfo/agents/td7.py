@@ -17,9 +17,14 @@ What TD7 adds to TD3, each a piece of ``update_step``:
   (``ilfo.agents.critic_targets.pal_loss``, the same authors' proof that PAL with uniform
   sampling has LAP's expected gradient), so the replay buffer stays uniform.
 
-Not built: TD7's policy checkpoints (evaluating with the best recent policy), which need the
-loop to defer updates across episodes; the actor acts as trained. The authors' code
-(sfujim/TD7) was read for the architecture and schedules; this is ilfo's own JAX.
+- **Policy checkpoints** (``policy_checkpoints``, on as in the authors' code): evaluations use
+  the checkpoint policy, the one whose minimum return over an assessment of its training
+  episodes is the best recent one, while the actor explores as trained. They live in the loop,
+  which defers the updates during an assessment (``ilfo.agents.policy_checkpoints``: the
+  schedule; ``ilfo.training.learners.PolicyCheckpoints``); ``update`` is the same either way.
+
+The authors' code (sfujim/TD7) was read for the architecture and schedules; this is ilfo's own
+JAX.
 
 Time augmentation (ilfo's fixed-horizon protocol) applies to the critic's samples as in TD3
 (``ilfo.agents.critic_targets.augment_time``); the encoder and the actor use the recorded times.
@@ -132,6 +137,24 @@ class TD7Config:
     "finite_horizon" is built for TD7."""
     max_time: int = count(1000)
     """Scale of the time feature (the horizon); set by the trainer in ``ilfo train``."""
+    policy_checkpoints: bool = True
+    """Evaluate with TD7's checkpoint policy (the authors' ``use_checkpoints``): updates wait
+    while the current policy is assessed over its training episodes, and it replaces the
+    checkpoint where its minimum return is at least the checkpoint's; the run's evaluations,
+    best and final policies are the checkpoint's. The return is the one the agent learns from
+    (under an imitation reward its sum, the proxy return). Off: updates after every episode,
+    evaluations of the policy as trained."""
+    checkpoint_max_episodes: int = count(20)
+    """Episodes an assessment lasts at most once ``checkpoint_early_updates`` have run (one
+    before); it ends at the first whose return falls below the checkpoint's minimum."""
+    checkpoint_early_updates: int = count(750_000, low=0)
+    """Updates during which assessments last one episode (the authors'
+    ``steps_before_checkpointing``: 75% of a 1M-step run); as the updates pass it, the
+    checkpoint's minimum return is scaled by ``checkpoint_reset_weight``."""
+    checkpoint_reset_weight: float = fraction(0.9)
+    """What the checkpoint's minimum return is multiplied by as the updates pass
+    ``checkpoint_early_updates``, so that a policy assessed over many episodes can replace one
+    that one episode assessed."""
 
     def __post_init__(self) -> None:
         check_fields(self)  # types and ranges, from the fields' declarations (ilfo.ranges)

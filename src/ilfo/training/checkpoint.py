@@ -3,8 +3,9 @@
 A checkpoint is the directory ``checkpoints/step_N`` (N the environment steps done): the agent
 state (``agent.msgpack``), the replay buffer (``replay.npz``), the loop's state (``LoopState``:
 ``state.json``'s ``loop``, with its random-phase states kept for the normaliser in
-``random_states.npz``), the episode reward's state (``state.json``'s ``reward_state``, with its
-arrays in ``reward_arrays.npz``) and the best policy so far (``best_policy.msgpack`` and
+``random_states.npz``; TD7's policy checkpoint, its policy in ``checkpoint_policy.msgpack``),
+the episode reward's state (``state.json``'s ``reward_state``, with its arrays in
+``reward_arrays.npz``) and the best policy so far (``best_policy.msgpack`` and
 ``best_policy.json``, where there is one); ``state.json``, written last, says its format
 (``migrations.CHECKPOINT_FORMAT``: an older checkpoint is read through ``migrations``).
 Every other source of randomness is derived from (seed, episode index), so a run resumed from
@@ -27,6 +28,8 @@ from typing import Any
 import flax.serialization
 import numpy as np
 
+from ilfo.agents import policy_of
+from ilfo.agents.policy_checkpoints import PolicyCheckpoint, canonical
 from ilfo.algos import AGENT_PARTS, ALGOS
 from ilfo.files import check_new_copy_dir, load_msgpack, load_npz, naming, sync_dir, sync_tree
 from ilfo.replay import ReplayBuffer
@@ -56,6 +59,8 @@ from ilfo.training.run_dir import (
 
 RANDOM_STATES_FILE = "random_states.npz"
 REWARD_ARRAYS_FILE = "reward_arrays.npz"
+CHECKPOINT_POLICY_FILE = "checkpoint_policy.msgpack"
+"""TD7's checkpoint policy (``LoopState.policy_checkpoint``), where there is one."""
 
 
 @dataclass(frozen=True)
@@ -81,6 +86,9 @@ class LoopState:
     refill_until: int = 0
     """Updates wait until this step: a run continued from a snapshot (no replay buffer) first
     refills its buffer with the policy's own steps."""
+    policy_checkpoint: PolicyCheckpoint | None = None
+    """TD7's checkpoint policy and its assessment under way (``agents.policy_checkpoints``),
+    where the agent is evaluated with one; None otherwise, and before its first episode."""
 
 
 @dataclass(frozen=True)
@@ -139,6 +147,12 @@ def _write_files(run_dir: Path, tmp: Path, ckpt: Checkpoint) -> None:
         with naming(tmp / REWARD_ARRAYS_FILE):
             # numpy's stubs let **arrays fill allow_pickle (a bool); these keys are array names.
             np.savez(tmp / REWARD_ARRAYS_FILE, **reward.arrays)  # type: ignore[arg-type]
+    checkpoint = loop.policy_checkpoint
+    if checkpoint is not None and checkpoint.policy is not None:
+        with naming(tmp / CHECKPOINT_POLICY_FILE):
+            (tmp / CHECKPOINT_POLICY_FILE).write_bytes(
+                flax.serialization.to_bytes(checkpoint.policy)
+            )
     for name in BEST_FILES:  # see restore_best_policy
         if (Path(run_dir) / name).is_file():
             with naming(tmp / name):
@@ -153,6 +167,7 @@ def _write_files(run_dir: Path, tmp: Path, ckpt: Checkpoint) -> None:
             "best_eval": loop.best_eval,
             "refill_until": loop.refill_until,
             "random_states": RANDOM_STATES_FILE if loop.random_states else None,
+            "policy_checkpoint": None if checkpoint is None else _checkpoint_record(checkpoint),
         },
         "reward_state": None
         if reward is None
@@ -162,6 +177,30 @@ def _write_files(run_dir: Path, tmp: Path, ckpt: Checkpoint) -> None:
         (tmp / STATE_FILE).write_text(json.dumps(state))  # last: see run_dir.CHECKPOINT_FILES
     with naming(tmp):
         sync_tree(tmp)
+
+
+def _checkpoint_record(checkpoint: PolicyCheckpoint) -> dict[str, Any]:
+    """What state.json holds of a policy checkpoint: its numbers, and its policy's file."""
+    record = dataclasses.asdict(dataclasses.replace(checkpoint, policy=None))
+    return {**record, "policy": None if checkpoint.policy is None else CHECKPOINT_POLICY_FILE}
+
+
+def _read_checkpoint_record(
+    record: dict[str, Any] | None,
+) -> tuple[PolicyCheckpoint | None, str | None]:
+    """A policy checkpoint's numbers from its state.json record (``_checkpoint_record``), and
+    the file of its policy (None where it has none yet)."""
+    if record is None:
+        return None, None
+    best, low = record["best_min_return"], record["min_return"]
+    checkpoint = PolicyCheckpoint(
+        best_min_return=None if best is None else float(best),
+        episodes=int(record["episodes"]),
+        pending_steps=int(record["pending_steps"]),
+        min_return=None if low is None else float(low),
+        updates=int(record["updates"]),
+    )
+    return checkpoint, record["policy"]
 
 
 BEST_FILES = (BEST_POLICY_FILE, BEST_POLICY_INFO)
@@ -226,11 +265,19 @@ def load_checkpoint(
             refill_until=int(loop_record["refill_until"]),
         )
         random_states_file = loop_record["random_states"]
+        # Added to format 2 with a default that keeps what older runs did (none).
+        policy_checkpoint, policy_file = _read_checkpoint_record(
+            loop_record.get("policy_checkpoint")
+        )
         if reward_record is not None:
             reward_values, arrays_file = dict(reward_record["values"]), reward_record["arrays"]
     except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as err:
         raise ValueError(f"{state_path} is not a readable checkpoint state ({err})") from None
     agent_state = load_msgpack(agent_template, ckpt / "agent.msgpack", "agent checkpoint")
+    if policy_checkpoint is not None and policy_file is not None:
+        policy = load_msgpack(policy_of(agent_template), ckpt / policy_file, "checkpoint policy")
+        policy_checkpoint = dataclasses.replace(policy_checkpoint, policy=canonical(policy))
+    loop = dataclasses.replace(loop, policy_checkpoint=policy_checkpoint)
     buffer = None
     omitted = not (ckpt / REPLAY_FILE).is_file() and (ckpt / REPLAY_OMITTED).is_file()
     if buffer_dims is not None and not omitted:

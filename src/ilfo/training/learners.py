@@ -10,6 +10,10 @@ hands the kind's strategy the parts of an episode that differ between kinds:
   OPOLO, OOPS_adv, f-IRL): the episode's proxy return is its rewards under today's parameters,
   and a reward that learns from fresh episodes of the policy (f-IRL's ``RolloutPlan``) gets
   them when due.
+- ``PolicyCheckpoints``: a replay-buffer agent evaluated with TD7's policy checkpoints
+  (``agents.policy_checkpoints``): its updates wait while the current policy is assessed on
+  its training episodes, then run, and the policy that evaluations use is replaced where the
+  current one won.
 - ``OnPolicyBatches``: an agent that learns from batches of its own fresh episodes (TRPO, for
   SIL): no random phase, a buffer that holds only the batch under collection, one ``learn``
   when it is full, then the reward's own step where it learns per batch
@@ -18,13 +22,16 @@ hands the kind's strategy the parts of an episode that differ between kinds:
 
 from __future__ import annotations
 
+import dataclasses
 from typing import TYPE_CHECKING, Any, Protocol
 
 import jax
 import numpy as np
 
+from ilfo.agents import policy_of
 from ilfo.agents.base import OnPolicyBatch
-from ilfo.algos import REWARD_PARTS, LearnedRewardPart, RewardPart
+from ilfo.agents.policy_checkpoints import CheckpointSchedule, PolicyCheckpoint, canonical
+from ilfo.algos import AGENT_PARTS, REWARD_PARTS, LearnedRewardPart, RewardPart
 from ilfo.composition.learned import RolloutPlan
 from ilfo.training.config import TrainConfig
 from ilfo.training.rollout import rollout_policy
@@ -52,9 +59,12 @@ class Learner(Protocol):
         episode reward (or the task reward) gives them."""
         ...
 
-    def learn(self, trainer: Trainer, num_steps: int, updating: bool) -> dict[str, float]:
+    def learn(
+        self, trainer: Trainer, num_steps: int, updating: bool, episode_return: float
+    ) -> dict[str, float]:
         """Learn from the episode of ``num_steps`` steps just stored (``updating``: not in the
-        random phase nor refilling a snapshot's buffer); returns the metrics to log."""
+        random phase nor refilling a snapshot's buffer; ``episode_return``: the sum of the
+        rewards it was stored with, the proxy return); returns the metrics to log."""
         ...
 
 
@@ -75,7 +85,9 @@ class OffPolicy:
     def episode_rewards(self, trainer: Trainer, observations: np.ndarray) -> np.ndarray | None:
         return None
 
-    def learn(self, trainer: Trainer, num_steps: int, updating: bool) -> dict[str, float]:
+    def learn(
+        self, trainer: Trainer, num_steps: int, updating: bool, episode_return: float
+    ) -> dict[str, float]:
         if not updating:
             return {}
         with trainer.hooks.timed("update"):
@@ -101,8 +113,10 @@ class LearnedReward(OffPolicy):
             self.functions.rewards(trainer.state, observations[:-1], observations[1:])
         )
 
-    def learn(self, trainer: Trainer, num_steps: int, updating: bool) -> dict[str, float]:
-        metrics = super().learn(trainer, num_steps, updating)
+    def learn(
+        self, trainer: Trainer, num_steps: int, updating: bool, episode_return: float
+    ) -> dict[str, float]:
+        metrics = super().learn(trainer, num_steps, updating, episode_return)
         plan = self.rollouts
         if (
             plan is not None
@@ -115,6 +129,38 @@ class LearnedReward(OffPolicy):
                 )
                 # Reading the metrics waits for the jitted learning: timed as "reward".
                 metrics.update({k: float(v) for k, v in learned.items() if k in LOGGED})
+        return metrics
+
+
+class PolicyCheckpoints(OffPolicy):
+    """A replay-buffer agent evaluated with TD7's policy checkpoints: the episode's return
+    counts into the assessment under way (``LoopState.policy_checkpoint``); at its end the
+    current policy becomes the checkpoint where it won, and then the updates of the
+    assessment's steps run, which waited for it."""
+
+    def __init__(self, schedule: CheckpointSchedule) -> None:
+        self.schedule = schedule
+
+    def learn(
+        self, trainer: Trainer, num_steps: int, updating: bool, episode_return: float
+    ) -> dict[str, float]:
+        """The assessment's metrics (TensorBoard only) where it ended: ``checkpoint_return``,
+        the checkpoint's minimum return, and ``checkpoint_replaced`` (1 or 0)."""
+        if not updating:
+            return {}
+        checkpoint = trainer.loop_state.policy_checkpoint or PolicyCheckpoint()
+        current = canonical(policy_of(trainer.state))
+        checkpoint, due = checkpoint.end_episode(episode_return, num_steps, current, self.schedule)
+        metrics: dict[str, float] = {}
+        if due:
+            num_updates = due * trainer.config.updates_per_step
+            with trainer.hooks.timed("update"):
+                trainer.state, metrics = updates(trainer, num_updates)
+            checkpoint = checkpoint.updates_done(num_updates, self.schedule)
+            assert checkpoint.best_min_return is not None  # set by the first assessment
+            metrics["checkpoint_replaced"] = float(checkpoint.policy is current)
+            metrics["checkpoint_return"] = checkpoint.best_min_return
+        trainer.loop_state = dataclasses.replace(trainer.loop_state, policy_checkpoint=checkpoint)
         return metrics
 
 
@@ -134,7 +180,9 @@ class OnPolicyBatches:
     def episode_rewards(self, trainer: Trainer, observations: np.ndarray) -> np.ndarray | None:
         return None
 
-    def learn(self, trainer: Trainer, num_steps: int, updating: bool) -> dict[str, float]:
+    def learn(
+        self, trainer: Trainer, num_steps: int, updating: bool, episode_return: float
+    ) -> dict[str, float]:
         """One iteration on the episodes collected since the last (all of the buffer's) once
         they make a batch, then the reward's step on the same episodes, and an empty buffer.
         The agent's value loss is logged as ``critic_loss``, its other metrics (TensorBoard
@@ -230,4 +278,6 @@ def learner_of(config: TrainConfig, functions: Any) -> Learner:
         assert recipe.reward is not None and isinstance(part, LearnedRewardPart)
         plan = None if part.rollouts is None else part.rollouts(config.part_config(recipe.reward))
         return LearnedReward(functions, plan)
-    return OffPolicy()
+    checkpoints = AGENT_PARTS[recipe.agent].policy_checkpoints
+    schedule = None if checkpoints is None else checkpoints(config.part_config(recipe.agent))
+    return OffPolicy() if schedule is None else PolicyCheckpoints(schedule)

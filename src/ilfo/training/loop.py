@@ -24,6 +24,7 @@ import jax
 import numpy as np
 
 from ilfo.agents import policy_of
+from ilfo.agents.policy_checkpoints import evaluation_policy
 from ilfo.files import write_bytes_atomic, write_json_atomic
 from ilfo.replay import ReplayBuffer
 from ilfo.rewards import RewardOutput
@@ -337,7 +338,8 @@ class Trainer:
             "train_task_return": round(float(np.sum(task_rewards)), 4),
             "_steps": num_steps,
         }
-        metrics = self.learner.learn(self, num_steps, not random_phase and not refilling)
+        updating = not random_phase and not refilling
+        metrics = self.learner.learn(self, num_steps, updating, float(np.sum(rewards)))
         row.update({name: round(value, 5) for name, value in metrics.items()})
         if self.step // cfg.eval_every > (self.step - num_steps) // cfg.eval_every:
             # An on-policy agent's policy changes only when it learns, and evaluation is
@@ -437,10 +439,12 @@ class Trainer:
 
     # ------------------------------------------------------------------------ evaluation
     def evaluate(self) -> dict[str, float]:
-        """Deterministic fixed-horizon episodes: both scores, normalised, and OT distance."""
+        """Deterministic fixed-horizon episodes of the evaluated policy (TD7's checkpoint
+        policy where it has one): both scores, normalised, and OT distance."""
         seeds = evaluation_seeds(self.config.seed, self.config.eval_episodes)
+        policy = evaluation_policy(self.loop_state.policy_checkpoint, self.state)
         scored = score_policy(
-            self.eval_env, self.agent, self.state, self.horizon, seeds, self.distance_probe
+            self.eval_env, self.agent, policy, self.horizon, seeds, self.distance_probe
         )
         out = {
             "eval_score": round(float(np.mean(scored.scores)), 3),
@@ -576,7 +580,9 @@ class Trainer:
             self.rewarder.load_state(ckpt.reward_state)
 
     def _save_policy(self, name: str) -> None:
-        """The policy alone (actor parameters and observation normaliser), atomically."""
+        """The evaluated policy alone (actor parameters and observation normaliser; TD7's
+        checkpoint policy where it has one), atomically."""
         import flax.serialization
 
-        write_bytes_atomic(self.run_dir / name, flax.serialization.to_bytes(policy_of(self.state)))
+        policy = evaluation_policy(self.loop_state.policy_checkpoint, self.state)
+        write_bytes_atomic(self.run_dir / name, flax.serialization.to_bytes(policy))

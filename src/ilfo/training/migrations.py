@@ -17,13 +17,14 @@ with a new format number. Resuming an older run brings its directory to today's 
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import warnings
 from collections.abc import Callable, Collection, Mapping
 from pathlib import Path
 from typing import Any
 
-from ilfo.algos import ALGOS
+from ilfo.algos import AGENT_PARTS, ALGOS
 from ilfo.files import read_settings_file, write_json_atomic
 from ilfo.training.run_dir import (
     BEST_POLICY_FILE,
@@ -38,9 +39,10 @@ UNVERSIONED = 0
 """The format of records written before they carried one."""
 FORMAT_KEY = "format"
 """config.json's key for its format (a checkpoint's state.json has ``CHECKPOINT_KEY``)."""
-CONFIG_FORMAT = 1
+CONFIG_FORMAT = 2
 """config.json's format today: a ``TrainConfig``'s fields, every setting resolved as the run
-used it (``TrainConfig.resolved``)."""
+used it (``TrainConfig.resolved``); since format 2 TD7's records say whether it evaluated
+with policy checkpoints."""
 CHECKPOINT_KEY = "schema"
 CHECKPOINT_FORMAT = 2
 """A checkpoint's format today (``checkpoint.save_checkpoint``): state.json holds the loop's
@@ -98,9 +100,31 @@ def _sweep_run_config_0_to_1(record: Record) -> Record:
     return _task_reward_demos_dropped(_contact_forces_observed(record))
 
 
-_RUN_CONFIG_STEPS: dict[int, Callable[[Record], Record]] = {UNVERSIONED: _run_config_0_to_1}
+def _config_1_to_2(record: Record) -> Record:
+    """Format 2 (2026-12-07): TD7 evaluates with its policy checkpoints by default
+    (``TD7Config.policy_checkpoints``); before, it evaluated the policy as trained, so a TD7
+    record without the setting reads with it off. A sweep manifest's TD7 config left to the
+    defaults (None) is resolved to its preset's, with them off: the sweep's runs not yet
+    started train as its others did."""
+    recipe = ALGOS.get(str(record.get("algo")))
+    if recipe is None or recipe.agent != "td7":
+        return record
+    td7 = record.get("td7")
+    if td7 is None:
+        td7 = dataclasses.asdict(AGENT_PARTS["td7"].default(str(record.get("preset", "paper"))))
+        td7.pop("policy_checkpoints")
+    if not isinstance(td7, Mapping) or "policy_checkpoints" in td7:
+        return record  # a damaged record: TrainConfig names its fault
+    return {**record, "td7": {**td7, "policy_checkpoints": False}}
+
+
+_RUN_CONFIG_STEPS: dict[int, Callable[[Record], Record]] = {
+    UNVERSIONED: _run_config_0_to_1,
+    1: _config_1_to_2,
+}
 _SWEEP_RUN_CONFIG_STEPS: dict[int, Callable[[Record], Record]] = {
-    UNVERSIONED: _sweep_run_config_0_to_1
+    UNVERSIONED: _sweep_run_config_0_to_1,
+    1: _config_1_to_2,
 }
 
 

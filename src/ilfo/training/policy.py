@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from ilfo.agents import Policy, policy_of
+from ilfo.agents.policy_checkpoints import evaluation_policy
 from ilfo.files import load_msgpack
 from ilfo.training.build import Agent, EnvInfo, env_info, make_agent, make_run_env
 from ilfo.training.checkpoint import Checkpoint, load_checkpoint
@@ -44,7 +45,8 @@ class RunPolicy:
 def load_run_policy(run_dir: str | Path, which: str = "final") -> RunPolicy:
     """A run's policy: ``final`` (``policy.msgpack``, written when the run finished, else the
     newest checkpoint's), ``best`` (``best_policy.msgpack``, the best-evaluated so far) or
-    ``latest`` (the newest checkpoint's). Clear errors for what is missing or damaged."""
+    ``latest`` (the newest checkpoint's). Each is the policy the run evaluates: TD7's
+    checkpoint policy where it has one. Clear errors for what is missing or damaged."""
     if which not in ("final", "best", "latest"):
         raise ValueError(f"which must be 'final', 'best' or 'latest', got {which!r}")
     run_dir = Path(run_dir)
@@ -63,4 +65,6 @@ def load_run_policy(run_dir: str | Path, which: str = "final") -> RunPolicy:
     if ckpt is None:
         raise FileNotFoundError(f"{run_dir} has neither {FINAL_POLICY_FILE} nor a checkpoint")
     loaded = load_checkpoint(ckpt, template, buffer_dims=None)
-    return RunPolicy(config, env, agent, policy_of(loaded.agent_state), "latest checkpoint", loaded)
+    # The policy the run evaluates (TD7's checkpoint policy where it has one).
+    policy = evaluation_policy(loaded.loop.policy_checkpoint, loaded.agent_state)
+    return RunPolicy(config, env, agent, policy, "latest checkpoint", loaded)
