@@ -87,10 +87,10 @@ class PolicyCheckpoint:
                 self, episodes=episodes, pending_steps=steps, min_return=low
             )
             return going_on, 0
-        winner = {} if beaten else {"policy": current, "best_min_return": low}
-        return dataclasses.replace(
-            self, episodes=0, pending_steps=0, min_return=None, **winner
-        ), steps
+        done = dataclasses.replace(self, episodes=0, pending_steps=0, min_return=None)
+        if not beaten:
+            done = dataclasses.replace(done, policy=current, best_min_return=low)
+        return done, steps
 
     def updates_done(self, num_updates: int, schedule: CheckpointSchedule) -> PolicyCheckpoint:
         """Count ``num_updates`` updates run after an assessment; where they pass
